@@ -1,0 +1,14 @@
+//! The dpp runtime: the plan compiler and the CPU backend.
+
+pub mod column;
+pub mod functor;
+pub mod host;
+pub mod types;
+
+pub use column::{Column, ColumnView};
+pub use functor::{
+    ArrayParam, CallContext, Functor, FunctorError, FunctorKind, FunctorLibrary, MonoidOp,
+    NamedParam, Signature, TypeConstraint, TypePattern,
+};
+pub use host::{HostValue, UniformSchema, Uniforms};
+pub use types::{ElemType, HostType, RecordId, RecordRegistry, RecordType};
