@@ -68,9 +68,15 @@ pub struct Stmt {
 #[derive(Debug, Clone, PartialEq)]
 pub enum StmtKind {
     /// `x = expr` (one target) or `(x, y) = expr` (several).
-    Bind { targets: Vec<Ident>, value: Expr },
+    Bind {
+        targets: Vec<Ident>,
+        value: Expr,
+    },
     /// `out name = expr`, or `out name` for an existing binding (`value` is `None`).
-    Out { name: Ident, value: Option<Expr> },
+    Out {
+        name: Ident,
+        value: Option<Expr>,
+    },
     /// `for var in start..end { body }` (end exclusive).
     For {
         var: Ident,
@@ -78,7 +84,10 @@ pub enum StmtKind {
         end: Expr,
         body: Block,
     },
-    While { cond: Expr, body: Block },
+    While {
+        cond: Expr,
+        body: Block,
+    },
     If {
         cond: Expr,
         then_block: Block,
@@ -109,11 +118,17 @@ pub enum ExprKind {
     Bool(bool),
     Name(Ident),
     /// `base.field`: a record field view (`rays.sample`) or a uniform (`camera.pixels`).
-    Field { base: Box<Expr>, field: Ident },
+    Field {
+        base: Box<Expr>,
+        field: Ident,
+    },
     /// A call: a primitive (`map<f>(…)`), a generator (`iota(n)`), a `fn`, a
     /// constructor (`vec3(0)`) or a host function (`len(a)`).
     Call(Call),
-    Unary { op: UnaryOp, operand: Box<Expr> },
+    Unary {
+        op: UnaryOp,
+        operand: Box<Expr>,
+    },
     Binary {
         op: BinaryOp,
         lhs: Box<Expr>,

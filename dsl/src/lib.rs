@@ -3,7 +3,13 @@
 
 pub mod ast;
 pub mod diagnostic;
+mod parser;
+mod render;
 pub mod source;
+mod suggest;
 
 pub use diagnostic::{Diagnostic, Label};
+pub use parser::parse_module;
+pub use render::{location, render};
 pub use source::{FileId, SourceFile, SourceMap, Span};
+pub use suggest::did_you_mean;

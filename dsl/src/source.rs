@@ -55,6 +55,11 @@ impl SourceMap {
         &self.files[id.0 as usize]
     }
 
+    /// Like [`SourceMap::get`], but `None` for an id from another map.
+    pub fn try_get(&self, id: FileId) -> Option<&SourceFile> {
+        self.files.get(id.0 as usize)
+    }
+
     pub fn find(&self, path: &Path) -> Option<FileId> {
         self.files
             .iter()
