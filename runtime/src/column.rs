@@ -160,10 +160,10 @@ impl Column {
 
     pub fn view(&self) -> ColumnView<'_> {
         map_primitive!(Column => ColumnView, self, v => v.as_slice(),
-            Column::Record { ty, fields } => ColumnView::Record {
-                ty: *ty,
-                fields: fields.iter().map(|f| f.view()).collect(),
-            })
+        Column::Record { ty, fields } => ColumnView::Record {
+            ty: *ty,
+            fields: fields.iter().map(|f| f.view()).collect(),
+        })
     }
 
     /// Elements `range` as a view.
@@ -245,18 +245,18 @@ impl<'a> ColumnView<'a> {
 
     pub fn slice(&self, range: std::ops::Range<usize>) -> ColumnView<'a> {
         map_primitive!(ColumnView => ColumnView, self, v => &v[range.clone()],
-            ColumnView::Record { ty, fields } => ColumnView::Record {
-                ty: *ty,
-                fields: fields.iter().map(|f| f.slice(range.clone())).collect(),
-            })
+        ColumnView::Record { ty, fields } => ColumnView::Record {
+            ty: *ty,
+            fields: fields.iter().map(|f| f.slice(range.clone())).collect(),
+        })
     }
 
     pub fn to_column(&self) -> Column {
         map_primitive!(ColumnView => Column, self, v => v.to_vec(),
-            ColumnView::Record { ty, fields } => Column::Record {
-                ty: *ty,
-                fields: fields.iter().map(|f| Arc::new(f.to_column())).collect(),
-            })
+        ColumnView::Record { ty, fields } => Column::Record {
+            ty: *ty,
+            fields: fields.iter().map(|f| Arc::new(f.to_column())).collect(),
+        })
     }
 
     pub fn field(&self, index: usize) -> &ColumnView<'a> {

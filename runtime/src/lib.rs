@@ -12,3 +12,11 @@ pub use functor::{
 };
 pub use host::{HostValue, UniformSchema, Uniforms};
 pub use types::{ElemType, HostType, RecordId, RecordRegistry, RecordType};
+
+pub mod compile;
+pub mod cpu;
+pub mod generic;
+pub mod host_eval;
+
+pub use compile::ir::Plan;
+pub use compile::{compile_file, compile_text, CompileFailure, CompileOptions};

@@ -85,7 +85,10 @@ impl RecordRegistry {
                 .all(|(_, t)| !matches!(t, ElemType::Record(_))),
             "record fields must be primitive element types"
         );
-        assert!(!record.fields.is_empty(), "a record needs at least one field");
+        assert!(
+            !record.fields.is_empty(),
+            "a record needs at least one field"
+        );
         self.records.push(record);
         RecordId(self.records.len() as u32 - 1)
     }

@@ -1,0 +1,455 @@
+//! The plan: a typed dataflow program of primitive applications inside
+//! structured control flow. Lowering produces it with one [`Node::Op`] per
+//! primitive; fusion groups ops into [`Node::Stage`]s, which is all a backend runs.
+//!
+//! Variables are slots: a name bound outside a loop or branch and rebound inside
+//! it is the same slot (that is how loop-carried state is written); other
+//! bindings get fresh slots, so most variables have a single definition.
+
+use crate::functor::MonoidOp;
+use crate::host::HostValue;
+use crate::types::{ElemType, HostType};
+use dpp_dsl::ast::{BinaryOp, UnaryOp};
+use dpp_dsl::Span;
+use serde::Serialize;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+pub struct VarId(pub u32);
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum VarType {
+    /// Not yet inferred (before type checking) or unreachable.
+    Unknown,
+    Array(ElemType),
+    Host(HostType),
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct VarInfo {
+    /// The source name (`rays`), or `%N` for a compiler temporary.
+    pub name: String,
+    #[serde(skip)]
+    pub span: Span,
+    pub ty: VarType,
+    /// The symbolic length of an array variable, when type checking knows one.
+    pub len: Option<HostExpr>,
+}
+
+/// A host scalar expression: evaluated on the host, never per element.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub enum HostExpr {
+    Const(HostValue),
+    /// A host variable: a param, a loop counter, a binding or a `reduce` result.
+    Var(VarId),
+    Uniform {
+        record: String,
+        field: String,
+    },
+    /// `len(a)` of an array variable.
+    Len(VarId),
+    Unary(
+        #[serde(serialize_with = "serialize_debug")] UnaryOp,
+        Box<HostExpr>,
+    ),
+    Binary(
+        #[serde(serialize_with = "serialize_debug")] BinaryOp,
+        Box<HostExpr>,
+        Box<HostExpr>,
+    ),
+    Call(HostFunction, Vec<HostExpr>),
+}
+
+fn serialize_debug<T: std::fmt::Debug, S: serde::Serializer>(
+    value: &T,
+    serializer: S,
+) -> Result<S::Ok, S::Error> {
+    serializer.serialize_str(&format!("{value:?}"))
+}
+
+/// Built-in host functions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum HostFunction {
+    Vec2,
+    Vec3,
+    Vec4,
+    Min,
+    Max,
+    Abs,
+    Floor,
+    Ceil,
+    Sqrt,
+}
+
+impl HostFunction {
+    pub const ALL: [(&'static str, HostFunction); 9] = [
+        ("vec2", HostFunction::Vec2),
+        ("vec3", HostFunction::Vec3),
+        ("vec4", HostFunction::Vec4),
+        ("min", HostFunction::Min),
+        ("max", HostFunction::Max),
+        ("abs", HostFunction::Abs),
+        ("floor", HostFunction::Floor),
+        ("ceil", HostFunction::Ceil),
+        ("sqrt", HostFunction::Sqrt),
+    ];
+
+    pub fn name(self) -> &'static str {
+        HostFunction::ALL
+            .iter()
+            .find(|(_, f)| *f == self)
+            .map(|(n, _)| *n)
+            .unwrap_or("?")
+    }
+}
+
+/// Where a plain `scatter` writes.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub enum ScatterTarget {
+    /// `len: m`: a new zeroed array of length `m`.
+    Len(HostExpr),
+    /// `into: dst`: a copy of `dst`.
+    Into(VarId),
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub enum OpKind {
+    /// `a.field`: a view of one field of a record array (no copy outside a stage).
+    Field { field: String },
+    /// `iota(n)`: `out[i] = i`.
+    Iota { count: HostExpr },
+    /// `fill(n, value)`.
+    Fill { count: HostExpr, value: HostExpr },
+    /// `map<f>(inputs…)`.
+    Map,
+    /// `gather(idx, src)`: inputs `[idx, src]`.
+    Gather,
+    /// `gather<f>(src, group: k)`: inputs `[src]`.
+    GroupGather { group: HostExpr },
+    /// `scatter<f>(src, fanout: k)`: inputs `[src]`.
+    Expand { fanout: HostExpr },
+    /// `scatter(idx, src, …)` and `scatter<f>(idx, src, into: dst)`: inputs `[idx, src]`.
+    Scatter {
+        target: ScatterTarget,
+        mask: Option<VarId>,
+        combine: Option<MonoidOp>,
+    },
+    /// `reduce<f>(a)`: the output is a host variable.
+    Reduce { op: MonoidOp },
+    /// `scan<f>(a)` / `exclusiveScan<f>(a)`.
+    Scan {
+        op: MonoidOp,
+        exclusive: bool,
+        segments: Option<VarId>,
+    },
+}
+
+/// One primitive application.
+#[derive(Clone, Debug, Serialize)]
+pub struct Op {
+    pub kind: OpKind,
+    /// The functor between angle brackets, if any.
+    pub functor: Option<String>,
+    pub inputs: Vec<VarId>,
+    pub outputs: Vec<VarId>,
+    /// The functor's named arguments in signature order, defaults filled in.
+    pub named: Vec<(String, HostExpr)>,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+impl Op {
+    /// The primitive's name as written (`map`, `gather`, `scatter`, …).
+    pub fn primitive(&self) -> &'static str {
+        match self.kind {
+            OpKind::Field { .. } => "field",
+            OpKind::Iota { .. } => "iota",
+            OpKind::Fill { .. } => "fill",
+            OpKind::Map => "map",
+            OpKind::Gather | OpKind::GroupGather { .. } => "gather",
+            OpKind::Expand { .. } | OpKind::Scatter { .. } => "scatter",
+            OpKind::Reduce { .. } => "reduce",
+            OpKind::Scan {
+                exclusive: false, ..
+            } => "scan",
+            OpKind::Scan {
+                exclusive: true, ..
+            } => "exclusiveScan",
+        }
+    }
+
+    /// `map<intersect>`, `gather`, `iota`.
+    pub fn label(&self) -> String {
+        if let OpKind::Field { field } = &self.kind {
+            return format!(".{field}");
+        }
+        match &self.functor {
+            Some(f) => format!("{}<{}>", self.primitive(), f),
+            None => self.primitive().to_string(),
+        }
+    }
+
+    /// Every array variable the op reads, named arguments included.
+    pub fn array_reads(&self) -> Vec<VarId> {
+        let mut reads = self.inputs.clone();
+        match &self.kind {
+            OpKind::Scatter { target, mask, .. } => {
+                if let ScatterTarget::Into(dst) = target {
+                    reads.push(*dst);
+                }
+                reads.extend(mask);
+            }
+            OpKind::Scan { segments, .. } => reads.extend(segments),
+            _ => {}
+        }
+        reads
+    }
+
+    /// Every host expression the op evaluates.
+    pub fn host_exprs(&self) -> Vec<&HostExpr> {
+        let mut exprs: Vec<&HostExpr> = self.named.iter().map(|(_, e)| e).collect();
+        match &self.kind {
+            OpKind::Iota { count } => exprs.push(count),
+            OpKind::Fill { count, value } => {
+                exprs.push(count);
+                exprs.push(value);
+            }
+            OpKind::GroupGather { group } => exprs.push(group),
+            OpKind::Expand { fanout } => exprs.push(fanout),
+            OpKind::Scatter {
+                target: ScatterTarget::Len(len),
+                ..
+            } => exprs.push(len),
+            _ => {}
+        }
+        exprs
+    }
+}
+
+/// Why a stage ends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Barrier {
+    /// Fusion is off.
+    Unfused,
+    /// A scan needs every element before its result exists.
+    Scan,
+    /// The host reads a reduce result.
+    Reduce,
+    /// A scatter writes through an index: its result is complete only at the end.
+    Scatter,
+    /// The next op runs over another number of elements (compaction, fan-out, group gather).
+    LengthChange,
+    /// The next op reads a value of this stage through an index (gather, group, fan-out source).
+    IndexedRead,
+    /// A loop, branch, host statement or the end of the block follows.
+    ControlFlow,
+}
+
+impl Barrier {
+    pub fn describe(self) -> &'static str {
+        match self {
+            Barrier::Unfused => "unfused",
+            Barrier::Scan => "scan",
+            Barrier::Reduce => "reduce result read by the host",
+            Barrier::Scatter => "scatter",
+            Barrier::LengthChange => "length change",
+            Barrier::IndexedRead => "indexed read of a value made here",
+            Barrier::ControlFlow => "control flow",
+        }
+    }
+}
+
+/// One parallel pass: one kernel launch on the GPU, one parallel loop on the CPU.
+#[derive(Clone, Debug, Serialize)]
+pub struct Stage {
+    pub ops: Vec<Op>,
+    /// The number of elements the stage runs over, symbolically.
+    pub index_space: Option<HostExpr>,
+    /// Arrays read element by element at the stage's own index.
+    pub reads_direct: Vec<VarId>,
+    /// Arrays read through an index (gather sources, group and fan-out sources).
+    pub reads_indexed: Vec<VarId>,
+    /// Host variables and uniforms the stage's host expressions read.
+    pub reads_uniform: Vec<String>,
+    /// Variables the stage writes in full; every other output stays inside the stage.
+    pub materialises: Vec<VarId>,
+    pub barrier: Barrier,
+}
+
+impl Stage {
+    /// The stage's ops in order: `iota → map<cameraRay> → map<intersect>`.
+    pub fn label(&self) -> String {
+        self.ops
+            .iter()
+            .map(Op::label)
+            .collect::<Vec<_>>()
+            .join(" → ")
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub enum Node {
+    /// A primitive before fusion (lowering's output).
+    Op(Op),
+    Stage(Stage),
+    /// A host scalar binding.
+    Host {
+        dst: VarId,
+        expr: HostExpr,
+        #[serde(skip)]
+        span: Span,
+    },
+    /// Rebinding an array name to another array (no copy: arrays are immutable).
+    Alias {
+        dst: VarId,
+        src: VarId,
+    },
+    For {
+        var: VarId,
+        start: HostExpr,
+        end: HostExpr,
+        body: Vec<Node>,
+        #[serde(skip)]
+        span: Span,
+    },
+    While {
+        cond: HostExpr,
+        body: Vec<Node>,
+        #[serde(skip)]
+        span: Span,
+    },
+    If {
+        #[serde(skip)]
+        span: Span,
+        cond: HostExpr,
+        then_body: Vec<Node>,
+        else_body: Vec<Node>,
+    },
+    Break,
+    /// `out name = …`: the value of `var` when this runs becomes output `name`.
+    Output {
+        name: String,
+        var: VarId,
+    },
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ParamInfo {
+    pub name: String,
+    pub var: VarId,
+    pub ty: HostType,
+    pub value: HostValue,
+    /// Whether `--set` overrode the file's value.
+    pub overridden: bool,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Plan {
+    pub pipeline: String,
+    pub fused: bool,
+    pub params: Vec<ParamInfo>,
+    pub vars: Vec<VarInfo>,
+    pub body: Vec<Node>,
+    /// Output names in declaration order.
+    pub outputs: Vec<String>,
+}
+
+impl Plan {
+    pub fn var(&self, id: VarId) -> &VarInfo {
+        &self.vars[id.0 as usize]
+    }
+
+    pub fn var_mut(&mut self, id: VarId) -> &mut VarInfo {
+        &mut self.vars[id.0 as usize]
+    }
+
+    /// Every stage in execution order of the text (loops and branches flattened).
+    pub fn stages(&self) -> Vec<&Stage> {
+        fn walk<'a>(nodes: &'a [Node], out: &mut Vec<&'a Stage>) {
+            for node in nodes {
+                match node {
+                    Node::Stage(s) => out.push(s),
+                    Node::For { body, .. } | Node::While { body, .. } => walk(body, out),
+                    Node::If {
+                        then_body,
+                        else_body,
+                        ..
+                    } => {
+                        walk(then_body, out);
+                        walk(else_body, out);
+                    }
+                    _ => {}
+                }
+            }
+        }
+        let mut out = Vec::new();
+        walk(&self.body, &mut out);
+        out
+    }
+}
+
+/// Visits every node of a body, depth first, in order.
+pub fn walk_nodes<'a>(nodes: &'a [Node], visit: &mut impl FnMut(&'a Node)) {
+    for node in nodes {
+        visit(node);
+        match node {
+            Node::For { body, .. } | Node::While { body, .. } => walk_nodes(body, visit),
+            Node::If {
+                then_body,
+                else_body,
+                ..
+            } => {
+                walk_nodes(then_body, visit);
+                walk_nodes(else_body, visit);
+            }
+            _ => {}
+        }
+    }
+}
+
+impl HostExpr {
+    /// Every host variable and array (through `len`) the expression reads.
+    pub fn visit_vars(&self, visit: &mut impl FnMut(VarId)) {
+        match self {
+            HostExpr::Const(_) | HostExpr::Uniform { .. } => {}
+            HostExpr::Var(v) | HostExpr::Len(v) => visit(*v),
+            HostExpr::Unary(_, e) => e.visit_vars(visit),
+            HostExpr::Binary(_, a, b) => {
+                a.visit_vars(visit);
+                b.visit_vars(visit);
+            }
+            HostExpr::Call(_, args) => args.iter().for_each(|a| a.visit_vars(visit)),
+        }
+    }
+}
+
+/// Every variable a node reads directly (not those of nested bodies).
+pub fn node_reads(node: &Node) -> Vec<VarId> {
+    let mut reads = Vec::new();
+    let host = |e: &HostExpr, reads: &mut Vec<VarId>| e.visit_vars(&mut |v| reads.push(v));
+    match node {
+        Node::Op(op) => {
+            reads.extend(op.array_reads());
+            for e in op.host_exprs() {
+                host(e, &mut reads);
+            }
+        }
+        Node::Stage(stage) => {
+            for op in &stage.ops {
+                reads.extend(op.array_reads());
+                for e in op.host_exprs() {
+                    host(e, &mut reads);
+                }
+            }
+        }
+        Node::Host { expr, .. } => host(expr, &mut reads),
+        Node::Alias { src, .. } => reads.push(*src),
+        Node::For { start, end, .. } => {
+            host(start, &mut reads);
+            host(end, &mut reads);
+        }
+        Node::While { cond, .. } | Node::If { cond, .. } => host(cond, &mut reads),
+        Node::Break => {}
+        Node::Output { var, .. } => reads.push(*var),
+    }
+    reads
+}

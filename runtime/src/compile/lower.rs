@@ -1,0 +1,1369 @@
+//! Pass 3: lower the AST into plan nodes ([`Node::Op`] per primitive), with
+//! names resolved to variable slots, `fn`s inlined at each call and `→` chains
+//! desugared into leading arguments. Unknown names, functors and arguments,
+//! wrong arity, `break` outside a loop and recursion are reported here.
+
+use super::ir::*;
+use super::resolve::{is_reserved, Program, GENERATORS, PRIMITIVES};
+use crate::functor::{FunctorKind, FunctorLibrary, Signature};
+use crate::host::HostValue;
+use crate::types::HostType;
+use dpp_dsl::ast::{self, Block, Call, ExprKind, Ident, StmtKind};
+use dpp_dsl::{did_you_mean, Diagnostic, Span};
+use std::collections::HashMap;
+
+pub struct Lowered {
+    pub vars: Vec<VarInfo>,
+    pub params: Vec<(String, VarId, Span)>,
+    pub body: Vec<Node>,
+    pub outputs: Vec<String>,
+}
+
+pub fn lower_program(
+    program: &Program<'_>,
+    library: &FunctorLibrary,
+    diagnostics: &mut Vec<Diagnostic>,
+) -> Lowered {
+    let mut lowerer = Lowerer {
+        program,
+        library,
+        diagnostics,
+        vars: Vec::new(),
+        scopes: Vec::new(),
+        fn_stack: Vec::new(),
+        outputs: Vec::new(),
+        params: HashMap::new(),
+    };
+    let mut params = Vec::new();
+    let mut body = Vec::new();
+    for param in &program.params {
+        let value = lowerer.lower_host(&param.value, &mut body);
+        let var = lowerer.new_var(&param.name.name, param.name.span, VarType::Unknown);
+        body.push(Node::Host {
+            dst: var,
+            expr: value,
+            span: param.span,
+        });
+        lowerer.params.insert(param.name.name.clone(), var);
+        params.push((param.name.name.clone(), var, param.name.span));
+    }
+    lowerer.scopes.push(Scope::new(ScopeKind::Function));
+    lowerer.lower_block_in_scope(&program.pipeline.body, &mut body);
+    lowerer.scopes.pop();
+    Lowered {
+        vars: lowerer.vars,
+        params,
+        body,
+        outputs: lowerer.outputs,
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Binding {
+    Array(VarId),
+    Host(VarId),
+}
+
+impl Binding {
+    fn var(self) -> VarId {
+        match self {
+            Binding::Array(v) | Binding::Host(v) => v,
+        }
+    }
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum ScopeKind {
+    /// The pipeline's or an inlined fn's top level: names outside are invisible.
+    Function,
+    Loop,
+    Block,
+}
+
+struct Scope {
+    kind: ScopeKind,
+    names: HashMap<String, Binding>,
+}
+
+impl Scope {
+    fn new(kind: ScopeKind) -> Scope {
+        Scope {
+            kind,
+            names: HashMap::new(),
+        }
+    }
+}
+
+/// What an expression lowers to.
+#[derive(Clone, Debug)]
+enum Value {
+    Array(VarId),
+    Host(HostExpr),
+    /// Several arrays: a multi-output map, bound with `(x, y) = …` or piped on.
+    Tuple(Vec<VarId>),
+    /// Already diagnosed; keeps lowering going to report more errors.
+    Error,
+}
+
+struct Lowerer<'a, 'p> {
+    program: &'a Program<'p>,
+    library: &'a FunctorLibrary,
+    diagnostics: &'a mut Vec<Diagnostic>,
+    vars: Vec<VarInfo>,
+    scopes: Vec<Scope>,
+    /// Names of the fns being inlined, to report recursion.
+    fn_stack: Vec<String>,
+    outputs: Vec<String>,
+    params: HashMap<String, VarId>,
+}
+
+impl Lowerer<'_, '_> {
+    fn error(&mut self, diagnostic: Diagnostic) {
+        self.diagnostics.push(diagnostic);
+    }
+
+    fn new_var(&mut self, name: &str, span: Span, ty: VarType) -> VarId {
+        // Shadowing names stay distinct in the plan's text: `n`, `n#1`, …
+        let taken = self
+            .vars
+            .iter()
+            .filter(|v| v.name == name || v.name.starts_with(&format!("{name}#")))
+            .count();
+        let name = if taken == 0 {
+            name.to_string()
+        } else {
+            format!("{name}#{taken}")
+        };
+        self.vars.push(VarInfo {
+            name,
+            span,
+            ty,
+            len: None,
+        });
+        VarId(self.vars.len() as u32 - 1)
+    }
+
+    fn new_temp(&mut self, span: Span) -> VarId {
+        let name = format!("%{}", self.vars.len());
+        self.new_var(&name, span, VarType::Unknown)
+    }
+
+    /// Looks a name up from the innermost scope out to the enclosing function
+    /// boundary, then among the params. Returns the binding and whether it lives
+    /// in the innermost scope.
+    fn lookup(&self, name: &str) -> Option<(Binding, bool)> {
+        for (depth, scope) in self.scopes.iter().enumerate().rev() {
+            if let Some(binding) = scope.names.get(name) {
+                return Some((*binding, depth == self.scopes.len() - 1));
+            }
+            if scope.kind == ScopeKind::Function {
+                break;
+            }
+        }
+        self.params.get(name).map(|v| (Binding::Host(*v), false))
+    }
+
+    fn visible_names(&self) -> Vec<String> {
+        let mut names: Vec<String> = Vec::new();
+        for scope in self.scopes.iter().rev() {
+            names.extend(scope.names.keys().cloned());
+            if scope.kind == ScopeKind::Function {
+                break;
+            }
+        }
+        names.extend(self.params.keys().cloned());
+        names.extend(self.library.uniforms.records.keys().cloned());
+        names
+    }
+
+    fn in_loop(&self) -> bool {
+        for scope in self.scopes.iter().rev() {
+            match scope.kind {
+                ScopeKind::Loop => return true,
+                ScopeKind::Function => return false,
+                ScopeKind::Block => {}
+            }
+        }
+        false
+    }
+
+    fn lower_block_in_scope(&mut self, block: &Block, out: &mut Vec<Node>) {
+        for (index, stmt) in block.stmts.iter().enumerate() {
+            if let StmtKind::Return(_) = stmt.kind {
+                // A fn's return is handled by `inline_fn`; anywhere else it is misplaced.
+                let message = if self.fn_stack.is_empty() {
+                    "`return` outside a fn"
+                } else if index + 1 != block.stmts.len() {
+                    "`return` must be the last statement of a fn"
+                } else {
+                    "`return` must be at the top level of a fn, not inside a loop or branch"
+                };
+                self.error(Diagnostic::error("dpp::return", message, stmt.span));
+                continue;
+            }
+            self.lower_stmt(stmt, out);
+        }
+    }
+
+    fn lower_nested_block(&mut self, block: &Block, kind: ScopeKind) -> Vec<Node> {
+        let mut nodes = Vec::new();
+        self.scopes.push(Scope::new(kind));
+        self.lower_block_in_scope(block, &mut nodes);
+        self.scopes.pop();
+        nodes
+    }
+
+    fn lower_stmt(&mut self, stmt: &ast::Stmt, out: &mut Vec<Node>) {
+        match &stmt.kind {
+            StmtKind::Bind { targets, value } => self.lower_binding(targets, value, out),
+            StmtKind::Out { name, value } => {
+                let var = match value {
+                    Some(value) => {
+                        self.lower_binding(std::slice::from_ref(name), value, out);
+                        self.lookup(&name.name).map(|(b, _)| b.var())
+                    }
+                    None => match self.lookup(&name.name) {
+                        Some((binding, _)) => Some(binding.var()),
+                        None => {
+                            self.unknown_name(name);
+                            None
+                        }
+                    },
+                };
+                if let Some(var) = var {
+                    if self.outputs.contains(&name.name) {
+                        if self.fn_stack.is_empty() {
+                            // Re-declaring in another branch is fine; it names the same output.
+                        }
+                    } else {
+                        self.outputs.push(name.name.clone());
+                    }
+                    out.push(Node::Output {
+                        name: name.name.clone(),
+                        var,
+                    });
+                }
+            }
+            StmtKind::For {
+                var,
+                start,
+                end,
+                body,
+            } => {
+                let start = self.lower_host(start, out);
+                let end = self.lower_host(end, out);
+                let counter = self.new_var(&var.name, var.span, VarType::Host(HostType::Int));
+                self.scopes.push(Scope::new(ScopeKind::Loop));
+                self.scopes
+                    .last_mut()
+                    .unwrap()
+                    .names
+                    .insert(var.name.clone(), Binding::Host(counter));
+                let mut nodes = Vec::new();
+                self.lower_block_in_scope(body, &mut nodes);
+                self.scopes.pop();
+                out.push(Node::For {
+                    span: stmt.span,
+                    var: counter,
+                    start,
+                    end,
+                    body: nodes,
+                });
+            }
+            StmtKind::While { cond, body } => {
+                // The condition is re-evaluated before each iteration, so it may
+                // only read values, not run primitives.
+                let mut hoisted = Vec::new();
+                let cond = self.lower_host(cond, &mut hoisted);
+                if !hoisted.is_empty() {
+                    self.error(
+                        Diagnostic::error(
+                            "dpp::while-condition",
+                            "a `while` condition must be a host expression without primitives",
+                            stmt.span,
+                        )
+                        .with_help(
+                            "bind the value before the loop and update it at the end of the body",
+                        ),
+                    );
+                }
+                let body = self.lower_nested_block(body, ScopeKind::Loop);
+                out.push(Node::While {
+                    cond,
+                    body,
+                    span: stmt.span,
+                });
+            }
+            StmtKind::If {
+                cond,
+                then_block,
+                else_block,
+            } => {
+                let cond = self.lower_host(cond, out);
+                let then_body = self.lower_nested_block(then_block, ScopeKind::Block);
+                let else_body = else_block
+                    .as_ref()
+                    .map(|b| self.lower_nested_block(b, ScopeKind::Block))
+                    .unwrap_or_default();
+                out.push(Node::If {
+                    span: stmt.span,
+                    cond,
+                    then_body,
+                    else_body,
+                });
+            }
+            StmtKind::Break => {
+                if self.in_loop() {
+                    out.push(Node::Break);
+                } else {
+                    self.error(Diagnostic::error(
+                        "dpp::break-outside-loop",
+                        "`break` outside a loop",
+                        stmt.span,
+                    ));
+                }
+            }
+            StmtKind::Return(_) => unreachable!("handled by lower_block_in_scope"),
+        }
+    }
+
+    /// `x = e` / `(x, y) = e`. A name bound in an enclosing scope is updated in
+    /// place (its slot); otherwise the binding gets a fresh variable.
+    fn lower_binding(&mut self, targets: &[Ident], value: &ast::Expr, out: &mut Vec<Node>) {
+        let first_new_var = self.vars.len();
+        let nodes_before = out.len();
+        let value = self.lower_expr(value, out);
+        let values: Vec<Value> = match value {
+            Value::Tuple(vars) if targets.len() > 1 => {
+                if vars.len() != targets.len() {
+                    let span = targets[0].span.to(targets[targets.len() - 1].span);
+                    self.error(Diagnostic::error(
+                        "dpp::arity",
+                        format!("{} names bound to {} values", targets.len(), vars.len()),
+                        span,
+                    ));
+                    return;
+                }
+                vars.into_iter().map(Value::Array).collect()
+            }
+            Value::Tuple(vars) => {
+                self.error(Diagnostic::error(
+                    "dpp::arity",
+                    format!(
+                        "this expression has {} outputs; bind them with `(a, b) = …`",
+                        vars.len()
+                    ),
+                    targets[0].span,
+                ));
+                return;
+            }
+            Value::Error => return,
+            single if targets.len() == 1 => vec![single],
+            _ => {
+                let span = targets[0].span.to(targets[targets.len() - 1].span);
+                self.error(Diagnostic::error(
+                    "dpp::arity",
+                    format!("{} names bound to one value", targets.len()),
+                    span,
+                ));
+                return;
+            }
+        };
+        for (target, value) in targets.iter().zip(values) {
+            self.bind(target, value, first_new_var, nodes_before, out);
+        }
+    }
+
+    fn bind(
+        &mut self,
+        target: &Ident,
+        value: Value,
+        first_new_var: usize,
+        nodes_before: usize,
+        out: &mut Vec<Node>,
+    ) {
+        if is_reserved(&target.name) || self.library.uniforms.records.contains_key(&target.name) {
+            self.error(Diagnostic::error(
+                "dpp::reserved",
+                format!(
+                    "`{}` is a name of the language and cannot be rebound",
+                    target.name
+                ),
+                target.span,
+            ));
+            return;
+        }
+        let mut existing = self.lookup(&target.name);
+        let is_param =
+            existing.is_some_and(|(b, _)| self.params.get(&target.name) == Some(&b.var()));
+        if is_param && !self.fn_stack.is_empty() {
+            // A fn's own names shadow params: its body cannot see the caller's state.
+            existing = None;
+        }
+        if let Some((_, false)) = existing {
+            if is_param {
+                self.error(
+                    Diagnostic::error(
+                        "dpp::param-rebind",
+                        format!("`{}` is a param and cannot be rebound", target.name),
+                        target.span,
+                    )
+                    .with_help(
+                        "params are set in the file or with `--set`; bind a new name instead",
+                    ),
+                );
+                return;
+            }
+        }
+        let slot = match existing {
+            Some((binding, false)) => Some(binding),
+            _ => None,
+        };
+        match value {
+            Value::Array(source) => {
+                let dst = match slot {
+                    Some(Binding::Array(v)) => v,
+                    Some(Binding::Host(_)) => {
+                        self.kind_change(target, "a host scalar", "an array");
+                        return;
+                    }
+                    None => self.new_var(&target.name, target.span, VarType::Unknown),
+                };
+                // A value computed by this very statement is written straight into
+                // the binding's slot instead of through an alias.
+                if !(source.0 as usize >= first_new_var
+                    && rename_output(&mut out[nodes_before..], source, dst))
+                {
+                    out.push(Node::Alias { dst, src: source });
+                }
+                self.declare(target, Binding::Array(dst));
+            }
+            Value::Host(expr) => {
+                let dst = match slot {
+                    Some(Binding::Host(v)) => v,
+                    Some(Binding::Array(_)) => {
+                        self.kind_change(target, "an array", "a host scalar");
+                        return;
+                    }
+                    None => self.new_var(&target.name, target.span, VarType::Unknown),
+                };
+                out.push(Node::Host {
+                    dst,
+                    expr,
+                    span: target.span,
+                });
+                self.declare(target, Binding::Host(dst));
+            }
+            Value::Tuple(_) | Value::Error => {}
+        }
+    }
+
+    /// Records a binding in the innermost scope unless it updates an outer slot.
+    fn declare(&mut self, target: &Ident, binding: Binding) {
+        if let Some((existing, false)) = self.lookup(&target.name) {
+            if existing == binding {
+                return;
+            }
+        }
+        self.scopes
+            .last_mut()
+            .expect("lowering always has a scope")
+            .names
+            .insert(target.name.clone(), binding);
+    }
+
+    fn kind_change(&mut self, target: &Ident, was: &str, now: &str) {
+        self.error(Diagnostic::error(
+            "dpp::type-mismatch",
+            format!(
+                "`{}` is {was} outside this block; it cannot become {now} here",
+                target.name
+            ),
+            target.span,
+        ));
+    }
+
+    fn unknown_name(&mut self, name: &Ident) {
+        let candidates = self.visible_names();
+        let mut diagnostic = Diagnostic::error(
+            "dpp::unknown-name",
+            format!("unknown name `{}`", name.name),
+            name.span,
+        );
+        if let Some(suggestion) = did_you_mean(&name.name, candidates.iter().map(String::as_str)) {
+            diagnostic = diagnostic.with_help(format!("did you mean `{suggestion}`?"));
+        }
+        self.error(diagnostic);
+    }
+
+    fn lower_host(&mut self, expr: &ast::Expr, out: &mut Vec<Node>) -> HostExpr {
+        match self.lower_expr(expr, out) {
+            Value::Host(e) => e,
+            Value::Error => HostExpr::Const(HostValue::Int(0)),
+            Value::Array(_) | Value::Tuple(_) => {
+                self.error(
+                    Diagnostic::error(
+                        "dpp::expected-scalar",
+                        "expected a host scalar, found an array",
+                        expr.span,
+                    )
+                    .with_help("arrays become scalars through `reduce<f>(a)` or `len(a)`"),
+                );
+                HostExpr::Const(HostValue::Int(0))
+            }
+        }
+    }
+
+    fn lower_array(&mut self, expr: &ast::Expr, out: &mut Vec<Node>) -> Option<VarId> {
+        match self.lower_expr(expr, out) {
+            Value::Array(v) => Some(v),
+            Value::Error => None,
+            Value::Host(_) => {
+                self.error(
+                    Diagnostic::error(
+                        "dpp::expected-array",
+                        "expected an array, found a host scalar",
+                        expr.span,
+                    )
+                    .with_help("make an array with `fill(n, value)` or `iota(n)`"),
+                );
+                None
+            }
+            Value::Tuple(vars) => {
+                self.error(Diagnostic::error(
+                    "dpp::arity",
+                    format!(
+                        "expected one array, found {} (a multi-output map)",
+                        vars.len()
+                    ),
+                    expr.span,
+                ));
+                None
+            }
+        }
+    }
+
+    fn lower_expr(&mut self, expr: &ast::Expr, out: &mut Vec<Node>) -> Value {
+        match &expr.kind {
+            ExprKind::Int(i) => Value::Host(HostExpr::Const(HostValue::Int(*i))),
+            ExprKind::Float(f) => Value::Host(HostExpr::Const(HostValue::Float(*f))),
+            ExprKind::Bool(b) => Value::Host(HostExpr::Const(HostValue::Bool(*b))),
+            ExprKind::Name(name) => {
+                match self.lookup(&name.name) {
+                    Some((Binding::Array(v), _)) => Value::Array(v),
+                    Some((Binding::Host(v), _)) => Value::Host(HostExpr::Var(v)),
+                    None => {
+                        if self.library.uniforms.records.contains_key(&name.name) {
+                            self.error(Diagnostic::error(
+                            "dpp::uniform",
+                            format!("`{}` is a uniform record; read one of its fields, like `{}.{}`", name.name, name.name,
+                                self.library.uniforms.records[&name.name].keys().next().map_or("field", String::as_str)),
+                            name.span,
+                        ));
+                        } else {
+                            self.unknown_name(name);
+                        }
+                        Value::Error
+                    }
+                }
+            }
+            ExprKind::Field { base, field } => self.lower_field(expr, base, field, out),
+            ExprKind::Call(call) => self.lower_call(call, expr.span, out),
+            ExprKind::Unary { op, operand } => {
+                let operand = self.lower_host(operand, out);
+                Value::Host(HostExpr::Unary(*op, Box::new(operand)))
+            }
+            ExprKind::Binary { op, lhs, rhs } => {
+                let l = self.lower_expr(lhs, out);
+                let r = self.lower_expr(rhs, out);
+                match (l, r) {
+                    (Value::Host(l), Value::Host(r)) => {
+                        Value::Host(HostExpr::Binary(*op, Box::new(l), Box::new(r)))
+                    }
+                    (Value::Error, _) | (_, Value::Error) => Value::Error,
+                    _ => {
+                        let functor = match op {
+                            ast::BinaryOp::Add => "add",
+                            ast::BinaryOp::Sub => "sub",
+                            ast::BinaryOp::Mul => "mul",
+                            ast::BinaryOp::Div => "div",
+                            ast::BinaryOp::Lt => "lt",
+                            ast::BinaryOp::Gt => "gt",
+                            ast::BinaryOp::Eq => "eq",
+                            _ => "…",
+                        };
+                        self.error(
+                            Diagnostic::error(
+                                "dpp::array-arithmetic",
+                                format!("`{}` combines host scalars, not arrays", op.symbol()),
+                                expr.span,
+                            )
+                            .with_help(format!(
+                                "combine arrays element by element with `map<{functor}>(a, b)`"
+                            )),
+                        );
+                        Value::Error
+                    }
+                }
+            }
+        }
+    }
+
+    fn lower_field(
+        &mut self,
+        expr: &ast::Expr,
+        base: &ast::Expr,
+        field: &Ident,
+        out: &mut Vec<Node>,
+    ) -> Value {
+        // `camera.pixels`: a uniform, unless a binding shadows the record's name.
+        if let ExprKind::Name(record) = &base.kind {
+            if self.lookup(&record.name).is_none() {
+                if let Some(fields) = self.library.uniforms.records.get(&record.name) {
+                    if fields.contains_key(&field.name) {
+                        return Value::Host(HostExpr::Uniform {
+                            record: record.name.clone(),
+                            field: field.name.clone(),
+                        });
+                    }
+                    let mut diagnostic = Diagnostic::error(
+                        "dpp::unknown-field",
+                        format!("`{}` has no field `{}`", record.name, field.name),
+                        field.span,
+                    );
+                    if let Some(s) = did_you_mean(&field.name, fields.keys().map(String::as_str)) {
+                        diagnostic = diagnostic.with_help(format!("did you mean `{s}`?"));
+                    }
+                    self.error(diagnostic);
+                    return Value::Error;
+                }
+            }
+        }
+        match self.lower_expr(base, out) {
+            Value::Array(src) => {
+                let dst = self.new_temp(expr.span);
+                self.vars[dst.0 as usize].name =
+                    format!("{}.{}", self.vars[src.0 as usize].name, field.name);
+                out.push(Node::Op(Op {
+                    kind: OpKind::Field {
+                        field: field.name.clone(),
+                    },
+                    functor: None,
+                    inputs: vec![src],
+                    outputs: vec![dst],
+                    named: Vec::new(),
+                    span: field.span,
+                }));
+                Value::Array(dst)
+            }
+            Value::Error => Value::Error,
+            _ => {
+                self.error(Diagnostic::error(
+                    "dpp::unknown-field",
+                    format!("host scalars have no fields (`.{}`)", field.name),
+                    field.span,
+                ));
+                Value::Error
+            }
+        }
+    }
+
+    fn lower_call(&mut self, call: &Call, span: Span, out: &mut Vec<Node>) -> Value {
+        let callee = call.callee.name.as_str();
+        // Leading arrays from the left of an arrow.
+        let mut positional: Vec<(Value, Span)> = Vec::new();
+        if let Some(piped) = &call.piped {
+            let value = self.lower_expr(piped, out);
+            match value {
+                Value::Tuple(vars) => {
+                    positional.extend(vars.into_iter().map(|v| (Value::Array(v), piped.span)))
+                }
+                other => positional.push((other, piped.span)),
+            }
+        } else if call.args.is_none() {
+            self.error(
+                Diagnostic::error(
+                    "dpp::syntax",
+                    format!("`{callee}` needs arguments in parentheses"),
+                    span,
+                )
+                .with_help("only the right side of `→` may omit its parentheses"),
+            );
+            return Value::Error;
+        }
+        let mut named: Vec<(&Ident, &ast::Expr)> = Vec::new();
+        for arg in call.args.iter().flatten() {
+            match &arg.name {
+                Some(name) => {
+                    if named.iter().any(|(n, _)| n.name == name.name) {
+                        self.error(Diagnostic::error(
+                            "dpp::duplicate",
+                            format!("argument `{}` given twice", name.name),
+                            name.span,
+                        ));
+                    }
+                    named.push((name, &arg.value));
+                }
+                None => {
+                    if !named.is_empty() {
+                        self.error(Diagnostic::error(
+                            "dpp::syntax",
+                            "positional arguments come before named ones",
+                            arg.value.span,
+                        ));
+                    }
+                    let value = self.lower_expr(&arg.value, out);
+                    positional.push((value, arg.value.span));
+                }
+            }
+        }
+
+        if let Some(functor) = call
+            .functor
+            .as_ref()
+            .filter(|_| !PRIMITIVES.contains(&callee))
+        {
+            self.error(Diagnostic::error(
+                "dpp::functor-on-non-primitive",
+                format!("`{callee}` is not a primitive and takes no functor"),
+                functor.span,
+            ));
+            return Value::Error;
+        }
+        if PRIMITIVES.contains(&callee) {
+            return self.lower_primitive(call, span, positional, named, out);
+        }
+        // Everything else takes no named arguments.
+        if let Some((name, _)) = named.first() {
+            self.error(Diagnostic::error(
+                "dpp::unknown-argument",
+                format!("`{callee}` takes no named arguments"),
+                name.span,
+            ));
+            return Value::Error;
+        }
+        match callee {
+            "iota" | "fill" => {
+                let expected = if callee == "iota" { 1 } else { 2 };
+                if !self.check_count(callee, expected, positional.len(), span) {
+                    return Value::Error;
+                }
+                let count = self.expect_host(positional[0].clone());
+                let kind = if callee == "iota" {
+                    OpKind::Iota { count }
+                } else {
+                    OpKind::Fill {
+                        count,
+                        value: self.expect_host(positional[1].clone()),
+                    }
+                };
+                let dst = self.new_temp(span);
+                out.push(Node::Op(Op {
+                    kind,
+                    functor: None,
+                    inputs: Vec::new(),
+                    outputs: vec![dst],
+                    named: Vec::new(),
+                    span: call.callee.span,
+                }));
+                Value::Array(dst)
+            }
+            "len" => {
+                if !self.check_count("len", 1, positional.len(), span) {
+                    return Value::Error;
+                }
+                match self.expect_array(positional[0].clone()) {
+                    Some(v) => Value::Host(HostExpr::Len(v)),
+                    None => Value::Error,
+                }
+            }
+            _ => {
+                if let Some((_, function)) = HostFunction::ALL.iter().find(|(n, _)| *n == callee) {
+                    let args = positional
+                        .into_iter()
+                        .map(|a| self.expect_host(a))
+                        .collect();
+                    return Value::Host(HostExpr::Call(*function, args));
+                }
+                if let Some(function) = self.program.fns.get(callee).copied() {
+                    return self.inline_fn(function, call, span, positional, out);
+                }
+                let mut candidates: Vec<&str> = PRIMITIVES.to_vec();
+                candidates.extend(GENERATORS);
+                candidates.extend(HostFunction::ALL.iter().map(|(n, _)| *n));
+                candidates.extend(self.program.fns.keys().copied());
+                let mut diagnostic = Diagnostic::error(
+                    "dpp::unknown-name",
+                    format!("unknown function `{callee}`"),
+                    call.callee.span,
+                );
+                if let Some(s) = did_you_mean(callee, candidates) {
+                    diagnostic = diagnostic.with_help(format!("did you mean `{s}`?"));
+                } else if self.library.get(callee).is_some() {
+                    diagnostic = diagnostic.with_help(format!(
+                        "`{callee}` is a functor: apply it with a primitive, like `map<{callee}>(…)`"
+                    ));
+                }
+                self.error(diagnostic);
+                Value::Error
+            }
+        }
+    }
+
+    fn check_count(&mut self, what: &str, expected: usize, found: usize, span: Span) -> bool {
+        if expected == found {
+            return true;
+        }
+        self.error(Diagnostic::error(
+            "dpp::arity",
+            format!(
+                "`{what}` takes {expected} argument{}, found {found}",
+                if expected == 1 { "" } else { "s" }
+            ),
+            span,
+        ));
+        false
+    }
+
+    fn expect_host(&mut self, (value, span): (Value, Span)) -> HostExpr {
+        match value {
+            Value::Host(e) => e,
+            Value::Error => HostExpr::Const(HostValue::Int(0)),
+            _ => {
+                self.error(Diagnostic::error(
+                    "dpp::expected-scalar",
+                    "expected a host scalar, found an array",
+                    span,
+                ));
+                HostExpr::Const(HostValue::Int(0))
+            }
+        }
+    }
+
+    fn expect_array(&mut self, (value, span): (Value, Span)) -> Option<VarId> {
+        match value {
+            Value::Array(v) => Some(v),
+            Value::Error => None,
+            Value::Host(_) => {
+                self.error(Diagnostic::error(
+                    "dpp::expected-array",
+                    "expected an array, found a host scalar",
+                    span,
+                ));
+                None
+            }
+            Value::Tuple(v) => {
+                self.error(Diagnostic::error(
+                    "dpp::arity",
+                    format!("expected one array, found {}", v.len()),
+                    span,
+                ));
+                None
+            }
+        }
+    }
+
+    fn inline_fn(
+        &mut self,
+        function: &ast::FnItem,
+        call: &Call,
+        span: Span,
+        positional: Vec<(Value, Span)>,
+        out: &mut Vec<Node>,
+    ) -> Value {
+        let name = function.name.name.clone();
+        if self.fn_stack.contains(&name) {
+            self.error(
+                Diagnostic::error(
+                    "dpp::recursion",
+                    format!("`{name}` calls itself; fns are inlined and cannot recurse"),
+                    call.callee.span,
+                )
+                .with_label(function.name.span, "defined here"),
+            );
+            return Value::Error;
+        }
+        if positional.len() != function.params.len() {
+            self.error(
+                Diagnostic::error(
+                    "dpp::arity",
+                    format!(
+                        "`{name}` takes {} argument{}, found {}",
+                        function.params.len(),
+                        if function.params.len() == 1 { "" } else { "s" },
+                        positional.len()
+                    ),
+                    span,
+                )
+                .with_label(function.name.span, "defined here"),
+            );
+            return Value::Error;
+        }
+        let mut scope = Scope::new(ScopeKind::Function);
+        for (param, (value, arg_span)) in function.params.iter().zip(positional) {
+            let binding = match value {
+                // Arrays are immutable, so a parameter can share its argument's slot
+                // unless the body rebinds it from a nested block (which updates the slot).
+                Value::Array(v)
+                    if !assigned_in_nested_block(&function.body, &param.name, false) =>
+                {
+                    Binding::Array(v)
+                }
+                Value::Array(v) => {
+                    let copy = self.new_var(&param.name, param.span, VarType::Unknown);
+                    out.push(Node::Alias { dst: copy, src: v });
+                    Binding::Array(copy)
+                }
+                Value::Host(HostExpr::Var(v))
+                    if !assigned_in_nested_block(&function.body, &param.name, false) =>
+                {
+                    Binding::Host(v)
+                }
+                Value::Host(expr) => {
+                    let var = self.new_var(&param.name, param.span, VarType::Unknown);
+                    out.push(Node::Host {
+                        dst: var,
+                        expr,
+                        span: arg_span,
+                    });
+                    Binding::Host(var)
+                }
+                Value::Error => return Value::Error,
+                Value::Tuple(_) => {
+                    self.error(Diagnostic::error(
+                        "dpp::arity",
+                        "a multi-output value cannot be a fn argument",
+                        arg_span,
+                    ));
+                    return Value::Error;
+                }
+            };
+            scope.names.insert(param.name.clone(), binding);
+        }
+        self.fn_stack.push(name.clone());
+        self.scopes.push(scope);
+        let stmts = &function.body.stmts;
+        let result = match stmts.last() {
+            Some(ast::Stmt {
+                kind: StmtKind::Return(expr),
+                ..
+            }) => {
+                for stmt in &stmts[..stmts.len() - 1] {
+                    if let StmtKind::Return(_) = stmt.kind {
+                        self.error(Diagnostic::error(
+                            "dpp::return",
+                            "`return` must be the last statement of a fn",
+                            stmt.span,
+                        ));
+                        continue;
+                    }
+                    self.lower_stmt(stmt, out);
+                }
+                self.lower_expr(expr, out)
+            }
+            _ => {
+                self.error(Diagnostic::error(
+                    "dpp::return",
+                    format!("`{name}` does not end with `return`"),
+                    function.name.span,
+                ));
+                Value::Error
+            }
+        };
+        self.scopes.pop();
+        self.fn_stack.pop();
+        result
+    }
+
+    fn lower_primitive(
+        &mut self,
+        call: &Call,
+        span: Span,
+        positional: Vec<(Value, Span)>,
+        named: Vec<(&Ident, &ast::Expr)>,
+        out: &mut Vec<Node>,
+    ) -> Value {
+        let primitive = call.callee.name.as_str();
+        let functor = match &call.functor {
+            Some(f) => match self.library.get(&f.name) {
+                Some(functor) => Some((f, functor.signature().clone())),
+                None => {
+                    let mut diagnostic = Diagnostic::error(
+                        "dpp::unknown-functor",
+                        format!("unknown functor `{}`", f.name),
+                        f.span,
+                    );
+                    if let Some(s) = did_you_mean(&f.name, self.library.names()) {
+                        diagnostic = diagnostic.with_help(format!("did you mean `{s}`?"));
+                    } else {
+                        diagnostic = diagnostic.with_help("`dpp functors` lists every functor");
+                    }
+                    self.error(diagnostic);
+                    return Value::Error;
+                }
+            },
+            None => None,
+        };
+        let arrays: Vec<Option<VarId>> = positional
+            .into_iter()
+            .map(|p| self.expect_array(p))
+            .collect();
+        if arrays.iter().any(Option::is_none) {
+            return Value::Error;
+        }
+        let arrays: Vec<VarId> = arrays.into_iter().flatten().collect();
+
+        // The primitive's own keys; every other named argument belongs to the functor.
+        let primitive_keys: &[&str] = match (primitive, functor.as_ref().map(|(_, s)| s.kind)) {
+            ("gather", Some(_)) => &["group"],
+            ("scatter", Some(FunctorKind::Expand)) => &["fanout"],
+            ("scatter", _) => &["len", "into", "mask"],
+            ("scan" | "exclusiveScan", _) => &["segments"],
+            _ => &[],
+        };
+        let mut keys: HashMap<&str, &ast::Expr> = HashMap::new();
+        let mut functor_named: Vec<(&Ident, &ast::Expr)> = Vec::new();
+        for (name, value) in named {
+            if primitive_keys.contains(&name.name.as_str()) {
+                keys.insert(name.name.as_str(), value);
+            } else {
+                functor_named.push((name, value));
+            }
+        }
+
+        let (kind, expected_kinds, arity): (OpKind, &[&str], Option<usize>) = match primitive {
+            "map" => (OpKind::Map, &["map", "monoid"], None),
+            "gather" if functor.is_some() => {
+                let Some(group) = self.required_key(&keys, "group", span, out) else {
+                    return Value::Error;
+                };
+                (OpKind::GroupGather { group }, &["group"], Some(1))
+            }
+            "gather" => (OpKind::Gather, &[], Some(2)),
+            "scatter"
+                if matches!(
+                    functor.as_ref().map(|(_, s)| s.kind),
+                    Some(FunctorKind::Expand)
+                ) =>
+            {
+                let Some(fanout) = self.required_key(&keys, "fanout", span, out) else {
+                    return Value::Error;
+                };
+                (OpKind::Expand { fanout }, &["expand"], Some(1))
+            }
+            "scatter" => {
+                let target = match (keys.get("len"), keys.get("into")) {
+                    (Some(len), None) => ScatterTarget::Len(self.lower_host(len, out)),
+                    (None, Some(into)) => match self.lower_array(into, out) {
+                        Some(dst) => ScatterTarget::Into(dst),
+                        None => return Value::Error,
+                    },
+                    (Some(_), Some(_)) => {
+                        self.error(Diagnostic::error(
+                            "dpp::scatter-target",
+                            "`scatter` takes `len:` or `into:`, not both",
+                            span,
+                        ));
+                        return Value::Error;
+                    }
+                    (None, None) => {
+                        self.error(Diagnostic::error(
+                            "dpp::scatter-target",
+                            "`scatter` needs `len: m` (a new array) or `into: dst` (a copy of dst)",
+                            span,
+                        ));
+                        return Value::Error;
+                    }
+                };
+                if functor.is_some() && !matches!(target, ScatterTarget::Into(_)) {
+                    self.error(Diagnostic::error(
+                        "dpp::scatter-target",
+                        "a combining `scatter<f>` needs `into: dst`",
+                        span,
+                    ));
+                    return Value::Error;
+                }
+                let mask = match keys.get("mask") {
+                    Some(mask) => match self.lower_array(mask, out) {
+                        Some(m) => Some(m),
+                        None => return Value::Error,
+                    },
+                    None => None,
+                };
+                let combine = functor.as_ref().and_then(|(_, s)| monoid(s));
+                (
+                    OpKind::Scatter {
+                        target,
+                        mask,
+                        combine,
+                    },
+                    &["monoid", "expand"],
+                    Some(2),
+                )
+            }
+            "reduce" | "scan" | "exclusiveScan" => {
+                let Some((f, signature)) = functor.as_ref() else {
+                    self.error(Diagnostic::error(
+                        "dpp::missing-functor",
+                        format!(
+                            "`{primitive}` needs an associative functor, like `{primitive}<add>`"
+                        ),
+                        call.callee.span,
+                    ));
+                    return Value::Error;
+                };
+                let Some(op) = monoid(signature) else {
+                    self.error(Diagnostic::error(
+                        "dpp::functor-kind",
+                        format!("`{}` is not associative; `{primitive}` takes add, mul, min, max, or, and", f.name),
+                        f.span,
+                    ));
+                    return Value::Error;
+                };
+                let kind = if primitive == "reduce" {
+                    OpKind::Reduce { op }
+                } else {
+                    let segments = match keys.get("segments") {
+                        Some(flags) => match self.lower_array(flags, out) {
+                            Some(v) => Some(v),
+                            None => return Value::Error,
+                        },
+                        None => None,
+                    };
+                    OpKind::Scan {
+                        op,
+                        exclusive: primitive == "exclusiveScan",
+                        segments,
+                    }
+                };
+                (kind, &["monoid"], Some(1))
+            }
+            _ => unreachable!("PRIMITIVES is exhaustive"),
+        };
+
+        // The functor's kind must suit the primitive form.
+        if let Some((f, signature)) = &functor {
+            let kind_name = match signature.kind {
+                FunctorKind::Map => "map",
+                FunctorKind::Group => "group",
+                FunctorKind::Expand => "expand",
+                FunctorKind::Monoid(_) => "monoid",
+            };
+            if !expected_kinds.contains(&kind_name) {
+                let hint = match signature.kind {
+                    FunctorKind::Map | FunctorKind::Monoid(_) => {
+                        format!("apply it with `map<{}>(…)`", f.name)
+                    }
+                    FunctorKind::Group => {
+                        format!("apply it with `gather<{}>(src, group: k)`", f.name)
+                    }
+                    FunctorKind::Expand => {
+                        format!("apply it with `scatter<{}>(src, fanout: k)`", f.name)
+                    }
+                };
+                self.error(
+                    Diagnostic::error(
+                        "dpp::functor-kind",
+                        format!(
+                            "`{}` is a {kind_name} functor and cannot be used with `{primitive}`",
+                            f.name
+                        ),
+                        f.span,
+                    )
+                    .with_help(hint),
+                );
+                return Value::Error;
+            }
+        } else if primitive == "map" {
+            self.error(Diagnostic::error(
+                "dpp::missing-functor",
+                "`map` needs a functor, like `map<add>(a, b)`",
+                call.callee.span,
+            ));
+            return Value::Error;
+        }
+
+        // Arity: the functor's inputs for map, the primitive's own otherwise.
+        let expected_arity = match (&kind, &functor) {
+            (OpKind::Map, Some((_, s))) => s.inputs.len(),
+            _ => arity.unwrap_or(0),
+        };
+        if arrays.len() != expected_arity {
+            let what = match &functor {
+                Some((f, _)) => format!("`{primitive}<{}>`", f.name),
+                None => format!("`{primitive}`"),
+            };
+            let mut diagnostic = Diagnostic::error(
+                "dpp::arity",
+                format!(
+                    "{what} takes {expected_arity} array argument{}, found {}",
+                    if expected_arity == 1 { "" } else { "s" },
+                    arrays.len()
+                ),
+                span,
+            );
+            if let (OpKind::Map, Some((_, s))) = (&kind, &functor) {
+                diagnostic = diagnostic.with_help(format!(
+                    "signature: {}",
+                    s.display(&self.library.records).trim()
+                ));
+            }
+            self.error(diagnostic);
+            return Value::Error;
+        }
+
+        // Named functor arguments, in signature order with defaults.
+        let mut named_values = Vec::new();
+        let signature_named = functor
+            .as_ref()
+            .map(|(_, s)| s.named.clone())
+            .unwrap_or_default();
+        for (name, value) in &functor_named {
+            if !signature_named.iter().any(|p| p.name == name.name) {
+                let mut candidates: Vec<&str> = signature_named.iter().map(|p| p.name).collect();
+                candidates.extend(primitive_keys);
+                let mut diagnostic = Diagnostic::error(
+                    "dpp::unknown-argument",
+                    format!("unknown argument `{}`", name.name),
+                    name.span,
+                );
+                if let Some(s) = did_you_mean(&name.name, candidates.iter().copied()) {
+                    diagnostic = diagnostic.with_help(format!("did you mean `{s}`?"));
+                } else if candidates.is_empty() {
+                    diagnostic = diagnostic.with_help("this takes no named arguments");
+                } else {
+                    diagnostic =
+                        diagnostic.with_help(format!("it takes: {}", candidates.join(", ")));
+                }
+                self.error(diagnostic);
+                let _ = value;
+            }
+        }
+        for param in &signature_named {
+            match functor_named.iter().find(|(n, _)| n.name == param.name) {
+                Some((_, value)) => {
+                    let expr = self.lower_host(value, out);
+                    named_values.push((param.name.to_string(), expr));
+                }
+                None => match param.default {
+                    Some(default) => {
+                        named_values.push((param.name.to_string(), HostExpr::Const(default)))
+                    }
+                    None => {
+                        self.error(Diagnostic::error(
+                            "dpp::missing-argument",
+                            format!(
+                                "`{}` needs the argument `{}: {}`",
+                                call.functor.as_ref().map_or("", |f| f.name.as_str()),
+                                param.name,
+                                param.ty
+                            ),
+                            span,
+                        ));
+                        return Value::Error;
+                    }
+                },
+            }
+        }
+
+        let output_count = match (&kind, &functor) {
+            (OpKind::Reduce { .. }, _) => 1,
+            (_, Some((_, s)))
+                if matches!(
+                    kind,
+                    OpKind::Map | OpKind::GroupGather { .. } | OpKind::Expand { .. }
+                ) =>
+            {
+                s.outputs.len()
+            }
+            _ => 1,
+        };
+        let outputs: Vec<VarId> = (0..output_count).map(|_| self.new_temp(span)).collect();
+        let is_reduce = matches!(kind, OpKind::Reduce { .. });
+        out.push(Node::Op(Op {
+            kind,
+            functor: functor.map(|(f, _)| f.name.clone()),
+            inputs: arrays,
+            outputs: outputs.clone(),
+            named: named_values,
+            span,
+        }));
+        if is_reduce {
+            Value::Host(HostExpr::Var(outputs[0]))
+        } else if outputs.len() == 1 {
+            Value::Array(outputs[0])
+        } else {
+            Value::Tuple(outputs)
+        }
+    }
+
+    fn required_key(
+        &mut self,
+        keys: &HashMap<&str, &ast::Expr>,
+        key: &str,
+        span: Span,
+        out: &mut Vec<Node>,
+    ) -> Option<HostExpr> {
+        match keys.get(key) {
+            Some(expr) => Some(self.lower_host(expr, out)),
+            None => {
+                self.error(Diagnostic::error(
+                    "dpp::missing-argument",
+                    format!("this form needs `{key}: k`"),
+                    span,
+                ));
+                None
+            }
+        }
+    }
+}
+
+fn monoid(signature: &Signature) -> Option<crate::functor::MonoidOp> {
+    match signature.kind {
+        FunctorKind::Monoid(op) => Some(op),
+        _ => None,
+    }
+}
+
+/// Renames output `from` of the op that defines it (among `nodes`) to `to`,
+/// unless another node there reads it.
+fn rename_output(nodes: &mut [Node], from: VarId, to: VarId) -> bool {
+    let mut read = false;
+    walk_nodes(nodes, &mut |node| {
+        read |= node_reads(node).contains(&from);
+    });
+    if read {
+        return false;
+    }
+    for node in nodes.iter_mut().rev() {
+        if let Node::Op(op) = node {
+            if let Some(output) = op.outputs.iter_mut().find(|o| **o == from) {
+                *output = to;
+                return true;
+            }
+        }
+    }
+    false
+}
+
+/// Whether `name` is bound inside a nested block (loop or branch) of `block`.
+fn assigned_in_nested_block(block: &Block, name: &str, nested: bool) -> bool {
+    block.stmts.iter().any(|stmt| match &stmt.kind {
+        StmtKind::Bind { targets, .. } => nested && targets.iter().any(|t| t.name == name),
+        StmtKind::Out { name: target, .. } => nested && target.name == name,
+        StmtKind::For { body, .. } | StmtKind::While { body, .. } => {
+            assigned_in_nested_block(body, name, true)
+        }
+        StmtKind::If {
+            then_block,
+            else_block,
+            ..
+        } => {
+            assigned_in_nested_block(then_block, name, true)
+                || else_block
+                    .as_ref()
+                    .is_some_and(|b| assigned_in_nested_block(b, name, true))
+        }
+        _ => false,
+    })
+}
