@@ -1,0 +1,478 @@
+//! The bounding volume hierarchy: built by obvhs (PLOC), flattened into our own
+//! two-wide layout, traversed by our own code (the same layout feeds the GPU).
+//!
+//! Layout: every [`BvhNode`] is an inner node holding the boxes of both children
+//! (64 bytes, Aila–Laine style), so one node visit tests two boxes and descends
+//! the nearer. A child with `count == 0` is the inner node `nodes[index]`; a child
+//! with `count > 0` is a leaf of triangles `index .. index + count` in
+//! [`Bvh::triangles`], which are stored in leaf order with their vertices copied
+//! (no index indirection in the hot loop). [`Bvh::triangle_ids`] maps a leaf-order
+//! position back to the triangle's index in the input file. The root is `nodes[0]`.
+
+use crate::mesh::{MeshError, TriangleMesh};
+use bytemuck::{Pod, Zeroable};
+use glam::{Vec3, Vec3A};
+use obvhs::aabb::Aabb;
+use obvhs::bvh2::node::Bvh2Node;
+use obvhs::triangle::Triangle;
+use std::time::Duration;
+
+/// Entries in a traversal stack: the deepest chain of inner nodes a BVH may have.
+/// The GPU shaders need a fixed bound too; [`Bvh::build`] guarantees it.
+pub const MAX_STACK_DEPTH: usize = 64;
+
+/// Triangles per leaf of the fallback median-split tree.
+const MEDIAN_SPLIT_LEAF_SIZE: usize = 4;
+
+/// One child of a [`BvhNode`]: its box and what it points to. 32 bytes, laid out
+/// like WGSL's `struct { min: vec3<f32>, index: u32, max: vec3<f32>, count: u32 }`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct BvhChild {
+    pub min: [f32; 3],
+    /// Inner child: node index. Leaf child: first triangle (leaf order).
+    pub index: u32,
+    pub max: [f32; 3],
+    /// 0 for an inner child, else the number of triangles in the leaf.
+    pub count: u32,
+}
+
+/// An inner node: both children's boxes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct BvhNode {
+    pub children: [BvhChild; 2],
+}
+
+/// A triangle's vertices, copied in leaf order (36 bytes; WGSL: three `array<f32, 3>`).
+/// The watertight test needs the exact input vertices, not edges derived from them.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct BvhTriangle {
+    pub v0: [f32; 3],
+    pub v1: [f32; 3],
+    pub v2: [f32; 3],
+}
+
+/// A ray segment: hits count when `0 < t < tmax`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    /// Need not be normalised; `t` is in units of its length.
+    pub direction: Vec3,
+    pub tmax: f32,
+}
+
+/// The closest hit: distance, triangle in input file order, and the barycentric
+/// weights `u` of `v1` and `v` of `v2` (the hit point is `(1-u-v) v0 + u v1 + v v2`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HitRecord {
+    pub t: f32,
+    pub prim: u32,
+    pub u: f32,
+    pub v: f32,
+}
+
+#[derive(Clone, Debug)]
+pub struct Bvh {
+    nodes: Vec<BvhNode>,
+    triangles: Vec<BvhTriangle>,
+    triangle_ids: Vec<u32>,
+    stack_depth: usize,
+}
+
+impl Bvh {
+    /// Builds the hierarchy for a mesh (validated first). Uses obvhs' PLOC builder
+    /// with its `medium` preset; in the unlikely case that its tree is deeper than
+    /// [`MAX_STACK_DEPTH`], falls back to a balanced median-split tree.
+    pub fn build(mesh: &TriangleMesh) -> Result<Bvh, MeshError> {
+        mesh.validate()?;
+        let triangles: Vec<Triangle> = (0..mesh.triangles.len())
+            .map(|i| {
+                let [v0, v1, v2] = mesh.triangle_vertices(i).map(Vec3A::from);
+                Triangle { v0, v1, v2 }
+            })
+            .collect();
+        let mut build_time = Duration::ZERO;
+        let tree = obvhs::bvh2::builder::build_bvh2_from_tris(
+            &triangles,
+            obvhs::BvhBuildParams::medium_build(),
+            &mut build_time,
+        );
+        let bvh = flatten(&tree.nodes, &tree.primitive_indices, mesh);
+        if bvh.stack_depth <= MAX_STACK_DEPTH {
+            Ok(bvh)
+        } else {
+            Ok(Bvh::build_median_split(mesh))
+        }
+    }
+
+    /// A balanced tree (depth about log2(n / 4)), for meshes that defeat PLOC.
+    fn build_median_split(mesh: &TriangleMesh) -> Bvh {
+        let boxes: Vec<Aabb> = (0..mesh.triangles.len())
+            .map(|i| Aabb::from_points(&mesh.triangle_vertices(i).map(Vec3A::from)))
+            .collect();
+        let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
+        let mut nodes = vec![Bvh2Node::default()];
+        let mut work = vec![(0usize, 0usize, boxes.len())];
+        while let Some((node, start, end)) = work.pop() {
+            let range = &mut order[start..end];
+            let bounds = range
+                .iter()
+                .fold(Aabb::INVALID, |b, &i| b.union(&boxes[i as usize]));
+            if range.len() <= MEDIAN_SPLIT_LEAF_SIZE {
+                nodes[node] = Bvh2Node::new(bounds, range.len() as u32, start as u32);
+                continue;
+            }
+            let centroids = range.iter().fold(Aabb::INVALID, |mut b, &i| {
+                b.extend(boxes[i as usize].center());
+                b
+            });
+            let axis = centroids.largest_axis();
+            let middle = range.len() / 2;
+            range.select_nth_unstable_by(middle, |&a, &b| {
+                let ca = boxes[a as usize].center_axis(axis);
+                let cb = boxes[b as usize].center_axis(axis);
+                ca.total_cmp(&cb)
+            });
+            let left = nodes.len();
+            nodes.extend([Bvh2Node::default(); 2]);
+            nodes[node] = Bvh2Node::new(bounds, 0, left as u32);
+            work.push((left, start, start + middle));
+            work.push((left + 1, start + middle, end));
+        }
+        flatten(&nodes, &order, mesh)
+    }
+
+    pub fn nodes(&self) -> &[BvhNode] {
+        &self.nodes
+    }
+
+    /// Triangle vertices in leaf order.
+    pub fn triangles(&self) -> &[BvhTriangle] {
+        &self.triangles
+    }
+
+    /// Input-file triangle index of each leaf-order triangle.
+    pub fn triangle_ids(&self) -> &[u32] {
+        &self.triangle_ids
+    }
+
+    /// The most stack entries a traversal of this tree can need (≤ [`MAX_STACK_DEPTH`]).
+    pub fn stack_depth(&self) -> usize {
+        self.stack_depth
+    }
+
+    /// The closest hit with `0 < t < ray.tmax`, if any.
+    #[inline]
+    pub fn intersect_closest(&self, ray: &Ray) -> Option<HitRecord> {
+        self.traverse::<false>(ray)
+            .map(|(leaf_triangle, t, u, v)| HitRecord {
+                t,
+                prim: self.triangle_ids[leaf_triangle],
+                u,
+                v,
+            })
+    }
+
+    /// Whether anything lies at `0 < t < tmax` (stops at the first hit found).
+    #[inline]
+    pub fn occluded(&self, ray: &Ray, tmax: f32) -> bool {
+        let segment = Ray { tmax, ..*ray };
+        self.traverse::<true>(&segment).is_some()
+    }
+
+    /// Dispatches on the ray's dominant axis so that the triangle test's axis
+    /// permutation is a compile-time constant (no indexing in the inner loop).
+    #[inline]
+    fn traverse<const ANY_HIT: bool>(&self, ray: &Ray) -> Option<(usize, f32, f32, f32)> {
+        let d = ray.direction.abs();
+        if d.x >= d.y && d.x >= d.z {
+            self.traverse_axes::<1, 2, 0, ANY_HIT>(ray)
+        } else if d.y >= d.z {
+            self.traverse_axes::<2, 0, 1, ANY_HIT>(ray)
+        } else {
+            self.traverse_axes::<0, 1, 2, ANY_HIT>(ray)
+        }
+    }
+
+    /// Stack-based traversal: test both children, intersect leaf children at once,
+    /// descend into the nearer inner child and push the farther one with its entry
+    /// distance (skipped on pop if a closer hit was found meanwhile).
+    /// Returns (leaf-order triangle, t, u, v).
+    fn traverse_axes<const KX: usize, const KY: usize, const KZ: usize, const ANY_HIT: bool>(
+        &self,
+        ray: &Ray,
+    ) -> Option<(usize, f32, f32, f32)> {
+        let prepared = PreparedRay::new::<KX, KY, KZ>(ray);
+        let mut closest = ray.tmax;
+        let mut best = None;
+        let mut stack = [(0u32, 0f32); MAX_STACK_DEPTH];
+        let mut stack_len = 0;
+        let mut node = 0usize;
+        loop {
+            let [left, right] = &self.nodes[node].children;
+            let t_left = prepared.entry_distance(left, closest);
+            let t_right = prepared.entry_distance(right, closest);
+            let (near, t_near, far, t_far) = if t_right < t_left {
+                (right, t_right, left, t_left)
+            } else {
+                (left, t_left, right, t_right)
+            };
+            let mut inner = [(0u32, 0f32); 2];
+            let mut inner_len = 0;
+            for (child, t_entry) in [(near, t_near), (far, t_far)] {
+                // Also culls the far child when the near leaf produced a closer hit.
+                if !is_entered_before(t_entry, closest) {
+                    continue;
+                }
+                if child.count == 0 {
+                    inner[inner_len] = (child.index, t_entry);
+                    inner_len += 1;
+                    continue;
+                }
+                let first = child.index as usize;
+                for index in first..first + child.count as usize {
+                    if let Some((t, u, v)) =
+                        prepared.intersect_triangle::<KX, KY, KZ>(&self.triangles[index], closest)
+                    {
+                        best = Some((index, t, u, v));
+                        if ANY_HIT {
+                            return best;
+                        }
+                        closest = t;
+                    }
+                }
+            }
+            match inner_len {
+                2 => {
+                    stack[stack_len] = inner[1];
+                    stack_len += 1;
+                    node = inner[0].0 as usize;
+                }
+                1 => node = inner[0].0 as usize,
+                _ => loop {
+                    if stack_len == 0 {
+                        return best;
+                    }
+                    stack_len -= 1;
+                    let (pending, t_entry) = stack[stack_len];
+                    if is_entered_before(t_entry, closest) {
+                        node = pending as usize;
+                        break;
+                    }
+                },
+            }
+        }
+    }
+}
+
+/// Whether a box entered at `t_entry` (+inf: missed) can hold a hit closer than
+/// `closest` (which may be +inf itself).
+#[inline(always)]
+fn is_entered_before(t_entry: f32, closest: f32) -> bool {
+    t_entry < f32::INFINITY && t_entry <= closest * ROBUST_FAR_SCALE
+}
+
+/// Scales a box's exit distance up so that rounding in the slab test never culls a
+/// box the ray touches (Ize 2013, "Robust BVH Ray Traversal": 1 + 2γ₃).
+const ROBUST_FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
+
+const fn gamma(n: u32) -> f32 {
+    let epsilon = f32::EPSILON * 0.5;
+    (n as f32 * epsilon) / (1.0 - n as f32 * epsilon)
+}
+
+/// Per-ray values precomputed once for all box and triangle tests.
+struct PreparedRay {
+    origin: [f32; 3],
+    /// `1 / direction`: ±inf for zero components, handled in [`Self::entry_distance`].
+    inverse_direction: [f32; 3],
+    /// Per axis, whether the ray enters a box through its max plane.
+    enters_at_max: [bool; 3],
+    /// The shear of Woop, Benthin, Wald (2013): `(Sx, Sy, Sz)`.
+    shear: [f32; 3],
+}
+
+impl PreparedRay {
+    #[inline(always)]
+    fn new<const KX: usize, const KY: usize, const KZ: usize>(ray: &Ray) -> PreparedRay {
+        let d = ray.direction.to_array();
+        let inverse_direction = d.map(|c| 1.0 / c);
+        PreparedRay {
+            origin: ray.origin.to_array(),
+            inverse_direction,
+            // The sign bit, so that -0 (inverse -inf) enters at the max plane too.
+            enters_at_max: d.map(|c| c.is_sign_negative()),
+            shear: [d[KX] / d[KZ], d[KY] / d[KZ], 1.0 / d[KZ]],
+        }
+    }
+
+    /// Distance at which the ray enters the child's box, or +inf if it misses it
+    /// before `tmax` (a ray parallel to a slab outside it enters at +inf too). Near and far planes are chosen by direction sign, so a NaN
+    /// (`0 * inf`: the ray lies in a slab plane) can only appear in one of them;
+    /// the comparisons below ignore it, which keeps that slab unconstrained:
+    /// conservative, never a false miss.
+    #[inline(always)]
+    fn entry_distance(&self, child: &BvhChild, tmax: f32) -> f32 {
+        let mut t_enter = 0.0f32;
+        let mut t_exit = tmax;
+        for axis in 0..3 {
+            let (near, far) = if self.enters_at_max[axis] {
+                (child.max[axis], child.min[axis])
+            } else {
+                (child.min[axis], child.max[axis])
+            };
+            let t_near = (near - self.origin[axis]) * self.inverse_direction[axis];
+            let t_far = (far - self.origin[axis]) * self.inverse_direction[axis];
+            // `x > acc` is false for NaN, so NaN leaves the accumulator unchanged.
+            if t_near > t_enter {
+                t_enter = t_near;
+            }
+            if t_far < t_exit {
+                t_exit = t_far;
+            }
+        }
+        if t_enter <= t_exit * ROBUST_FAR_SCALE {
+            t_enter
+        } else {
+            f32::INFINITY
+        }
+    }
+
+    /// Watertight ray–triangle intersection (Woop, Benthin, Wald 2013, two-sided):
+    /// vertices are sheared into ray space so that edge functions of a shared edge
+    /// are computed from the same numbers by both triangles, and exact zeros are
+    /// re-evaluated in double precision. Returns `(t, u, v)` for `0 < t < tmax`.
+    #[inline(always)]
+    fn intersect_triangle<const KX: usize, const KY: usize, const KZ: usize>(
+        &self,
+        triangle: &BvhTriangle,
+        tmax: f32,
+    ) -> Option<(f32, f32, f32)> {
+        let [sx, sy, sz] = self.shear;
+        let relative = |v: &[f32; 3]| {
+            let p = [
+                v[0] - self.origin[0],
+                v[1] - self.origin[1],
+                v[2] - self.origin[2],
+            ];
+            (p[KX] - sx * p[KZ], p[KY] - sy * p[KZ], sz * p[KZ])
+        };
+        let (ax, ay, az) = relative(&triangle.v0);
+        let (bx, by, bz) = relative(&triangle.v1);
+        let (cx, cy, cz) = relative(&triangle.v2);
+
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            let edge = |px: f32, py: f32, qx: f32, qy: f32| {
+                (f64::from(px) * f64::from(qy) - f64::from(py) * f64::from(qx)) as f32
+            };
+            u = edge(cx, cy, bx, by);
+            v = edge(ax, ay, cx, cy);
+            w = edge(bx, by, ax, ay);
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let determinant = u + v + w;
+        if determinant == 0.0 {
+            return None;
+        }
+        let t = (u * az + v * bz + w * cz) / determinant;
+        if t > 0.0 && t < tmax {
+            Some((t, v / determinant, w / determinant))
+        } else {
+            None
+        }
+    }
+}
+
+/// Converts an obvhs-style binary tree (root at 0, siblings at `first_index` and
+/// `first_index + 1`, leaves indexing `primitive_indices`) into our layout, copying
+/// triangles in depth-first leaf order.
+fn flatten(source: &[Bvh2Node], primitive_indices: &[u32], mesh: &TriangleMesh) -> Bvh {
+    let mut bvh = Bvh {
+        nodes: Vec::with_capacity(source.len() / 2 + 1),
+        triangles: Vec::with_capacity(primitive_indices.len()),
+        triangle_ids: Vec::with_capacity(primitive_indices.len()),
+        stack_depth: 1,
+    };
+    let append_leaf = |bvh: &mut Bvh, node: &Bvh2Node, first: u32, count: u32| {
+        let index = bvh.triangles.len() as u32;
+        let range = first as usize..(first + count) as usize;
+        for &id in &primitive_indices[range] {
+            let [v0, v1, v2] = mesh.triangle_vertices(id as usize).map(|v| v.to_array());
+            bvh.triangles.push(BvhTriangle { v0, v1, v2 });
+            bvh.triangle_ids.push(id);
+        }
+        BvhChild {
+            min: node.aabb().min.to_array(),
+            index,
+            max: node.aabb().max.to_array(),
+            count,
+        }
+    };
+
+    let root = &source[0];
+    if root.is_leaf() {
+        // A single-leaf tree still needs an inner node; split the leaf's range in
+        // two (a one-triangle leaf appears twice, which is harmless).
+        let first_half = root.prim_count.div_ceil(2);
+        let left = append_leaf(&mut bvh, root, root.first_index, first_half);
+        let right = if root.prim_count > first_half {
+            append_leaf(
+                &mut bvh,
+                root,
+                root.first_index + first_half,
+                root.prim_count - first_half,
+            )
+        } else {
+            left
+        };
+        bvh.nodes.push(BvhNode {
+            children: [left, right],
+        });
+        return bvh;
+    }
+
+    bvh.nodes.push(BvhNode::default());
+    // (source node, our node, depth of our node); right pushed first so the left
+    // subtree is laid out first.
+    let mut work = vec![(0usize, 0usize, 1usize)];
+    while let Some((source_index, our_index, depth)) = work.pop() {
+        bvh.stack_depth = bvh.stack_depth.max(depth);
+        let first_child = source[source_index].first_index as usize;
+        let mut children = [BvhChild::default(); 2];
+        let mut inner_children = [None; 2];
+        for (side, child) in children.iter_mut().enumerate() {
+            let child_node = &source[first_child + side];
+            if child_node.is_leaf() {
+                *child = append_leaf(
+                    &mut bvh,
+                    child_node,
+                    child_node.first_index,
+                    child_node.prim_count,
+                );
+            } else {
+                let index = bvh.nodes.len();
+                bvh.nodes.push(BvhNode::default());
+                *child = BvhChild {
+                    min: child_node.aabb().min.to_array(),
+                    index: index as u32,
+                    max: child_node.aabb().max.to_array(),
+                    count: 0,
+                };
+                inner_children[side] = Some((first_child + side, index, depth + 1));
+            }
+        }
+        bvh.nodes[our_index] = BvhNode { children };
+        work.extend(inner_children.into_iter().rev().flatten());
+    }
+    bvh
+}
+
+#[cfg(test)]
+mod tests;

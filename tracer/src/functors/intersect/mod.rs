@@ -1,0 +1,126 @@
+//! `intersect(ray: Ray) -> (hit: Hit)`: the closest hit of each ray with
+//! `0 < t < ray.tmax`, triangles named in input file order.
+
+use crate::functors::{hit_fields, record_fields_mut, RayColumns};
+use crate::scene::TraceResources;
+use dpp_runtime::{
+    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
+    RecordId, Signature, TypePattern,
+};
+
+pub struct Intersect {
+    signature: Signature,
+}
+
+impl Intersect {
+    pub fn new(ray: RecordId, hit: RecordId) -> Intersect {
+        Intersect {
+            signature: Signature {
+                name: "intersect",
+                kind: FunctorKind::Map,
+                inputs: vec![ArrayParam {
+                    name: "ray",
+                    ty: TypePattern::Exact(ElemType::Record(ray)),
+                }],
+                outputs: vec![ArrayParam {
+                    name: "hit",
+                    ty: TypePattern::Exact(ElemType::Record(hit)),
+                }],
+                named: vec![],
+                doc: "closest hit of the ray with the scene (miss: t = inf, prim = 4294967295)",
+            },
+        }
+    }
+}
+
+impl Functor for Intersect {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        let bvh = &ctx.resources::<TraceResources>()?.scene.bvh;
+        let rays = RayColumns::new(&inputs[0]);
+        let [t, prim, u, v] = record_fields_mut::<4>(&mut outputs[0])?;
+        let (t, prim, u, v) = (
+            t.as_f32_mut(),
+            prim.as_u32_mut(),
+            u.as_f32_mut(),
+            v.as_f32_mut(),
+        );
+        t.reserve(rays.len());
+        prim.reserve(rays.len());
+        u.reserve(rays.len());
+        v.reserve(rays.len());
+        for index in 0..rays.len() {
+            let (hit_t, hit_prim, hit_u, hit_v) =
+                hit_fields(bvh.intersect_closest(&rays.get(index)));
+            t.push(hit_t);
+            prim.push(hit_prim);
+            u.push(hit_u);
+            v.push(hit_v);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::functors::test_support::{probe_rays, Fixture};
+    use crate::functors::MISS_PRIM;
+    use dpp_runtime::Column;
+    use glam::Vec3;
+
+    #[test]
+    fn closest_hits_in_file_order_and_misses() {
+        let fixture = Fixture::new();
+        let rays = probe_rays(&fixture);
+        let out = fixture.run("intersect", &[], 0, &[rays.view()]).unwrap();
+        let hits = out[0].view();
+        assert_eq!(out[0].elem_type(), fixture.record("Hit"));
+        assert_eq!(
+            hits.field(0).as_f32(),
+            &[2.0, 3.0, f32::INFINITY, f32::INFINITY]
+        );
+        // (0.25, 0.5) lies in the second triangle of the small square; (3, 0) in the
+        // big square's first (4-5-6) triangle.
+        assert_eq!(hits.field(1).as_u32(), &[1, 2, MISS_PRIM, MISS_PRIM]);
+        assert_eq!(&hits.field(2).as_f32()[2..], &[0.0, 0.0]);
+        assert_eq!(&hits.field(3).as_f32()[2..], &[0.0, 0.0]);
+        // Barycentrics reproduce the hit point: triangle 1 is (v0, v2, v3).
+        let (u, v) = (hits.field(2).as_f32()[0], hits.field(3).as_f32()[0]);
+        let point = (1.0 - u - v) * Vec3::new(-1.0, -1.0, 0.0)
+            + u * Vec3::new(1.0, 1.0, 0.0)
+            + v * Vec3::new(-1.0, 1.0, 0.0);
+        assert!((point - Vec3::new(0.25, 0.5, 0.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn missing_scene_is_an_error() {
+        let fixture = Fixture::new();
+        let rays = probe_rays(&fixture);
+        let functor = fixture.library.get("intersect").unwrap();
+        let ctx = dpp_runtime::CallContext {
+            named: &[],
+            uniforms: &fixture.uniforms,
+            resources: &(),
+            first_index: 0,
+            group: 1,
+            records: &fixture.library.records,
+        };
+        let mut outputs = vec![Column::with_capacity(
+            fixture.record("Hit"),
+            0,
+            &fixture.library.records,
+        )];
+        let error = functor
+            .run_cpu(&ctx, &[rays.view()], &mut outputs)
+            .unwrap_err();
+        assert!(error.0.contains("no scene loaded"), "{error}");
+    }
+}

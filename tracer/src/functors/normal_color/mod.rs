@@ -1,0 +1,146 @@
+//! `normalColor(ray: Ray, hit: Hit) -> (color: vec3)`: the hit triangle's geometric
+//! normal, turned to face the viewer, as RGB `n * 0.5 + 0.5`; a dark background on
+//! a miss. A picture of the geometry without any lighting.
+
+use crate::functors::{HitColumns, RayColumns, MISS_PRIM};
+use crate::scene::TraceResources;
+use dpp_runtime::{
+    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
+    RecordId, Signature, TypePattern,
+};
+use glam::Vec3;
+
+/// The colour of rays that hit nothing.
+pub const BACKGROUND: Vec3 = Vec3::new(0.1, 0.1, 0.12);
+
+pub struct NormalColor {
+    signature: Signature,
+}
+
+impl NormalColor {
+    pub fn new(ray: RecordId, hit: RecordId) -> NormalColor {
+        NormalColor {
+            signature: Signature {
+                name: "normalColor",
+                kind: FunctorKind::Map,
+                inputs: vec![
+                    ArrayParam {
+                        name: "ray",
+                        ty: TypePattern::Exact(ElemType::Record(ray)),
+                    },
+                    ArrayParam {
+                        name: "hit",
+                        ty: TypePattern::Exact(ElemType::Record(hit)),
+                    },
+                ],
+                outputs: vec![ArrayParam {
+                    name: "color",
+                    ty: TypePattern::Exact(ElemType::Vec3),
+                }],
+                named: vec![],
+                doc: "viewer-facing geometric normal of the hit as RGB (n*0.5+0.5); dark background on a miss",
+            },
+        }
+    }
+}
+
+impl Functor for NormalColor {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        let mesh = &ctx.resources::<TraceResources>()?.scene.mesh;
+        let rays = RayColumns::new(&inputs[0]);
+        let hits = HitColumns::new(&inputs[1]);
+        let colors = outputs[0].as_vec3_mut();
+        colors.reserve(rays.len());
+        for (&direction, &prim) in rays.dir.iter().zip(hits.prim) {
+            if prim == MISS_PRIM {
+                colors.push(BACKGROUND);
+                continue;
+            }
+            if prim as usize >= mesh.triangles.len() {
+                return Err(FunctorError(format!(
+                    "normalColor: hit names triangle {prim}, but the scene has {} triangles",
+                    mesh.triangles.len()
+                )));
+            }
+            let normal = mesh.face_normal(prim as usize).normalize_or_zero();
+            let facing = if normal.dot(direction) > 0.0 {
+                -normal
+            } else {
+                normal
+            };
+            colors.push(facing * 0.5 + 0.5);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::BACKGROUND;
+    use crate::functors::test_support::{probe_rays, Fixture};
+    use dpp_runtime::{Column, ElemType};
+    use glam::Vec3;
+    use std::sync::Arc;
+
+    #[test]
+    fn normals_face_the_viewer_and_misses_are_background() {
+        let fixture = Fixture::new();
+        let rays = probe_rays(&fixture);
+        let hits = fixture.run("intersect", &[], 0, &[rays.view()]).unwrap();
+        let out = fixture
+            .run("normalColor", &[], 0, &[rays.view(), hits[0].view()])
+            .unwrap();
+        let facing_up = Vec3::new(0.5, 0.5, 1.0);
+        assert_eq!(
+            out[0].view().as_vec3(),
+            &[facing_up, facing_up, BACKGROUND, BACKGROUND]
+        );
+
+        // Seen from below, the same triangles face -z.
+        let ElemType::Record(ty) = fixture.record("Ray") else {
+            unreachable!("Ray is a record")
+        };
+        let from_below = Column::Record {
+            ty,
+            fields: vec![
+                Arc::new(Column::Vec3(vec![Vec3::new(0.25, 0.5, -0.5)])),
+                Arc::new(Column::Vec3(vec![Vec3::Z])),
+                Arc::new(Column::F32(vec![f32::INFINITY])),
+                Arc::new(Column::U32(vec![0])),
+            ],
+        };
+        let hits = fixture
+            .run("intersect", &[], 0, &[from_below.view()])
+            .unwrap();
+        let out = fixture
+            .run("normalColor", &[], 0, &[from_below.view(), hits[0].view()])
+            .unwrap();
+        assert_eq!(out[0].view().as_vec3(), &[Vec3::new(0.5, 0.5, 0.0)]);
+    }
+
+    #[test]
+    fn unknown_triangle_is_an_error() {
+        let fixture = Fixture::new();
+        let rays = probe_rays(&fixture);
+        let hits = fixture.run("intersect", &[], 0, &[rays.view()]).unwrap();
+        let Column::Record { ty, fields } = &hits[0] else {
+            unreachable!()
+        };
+        let mut fields = fields.clone();
+        fields[1] = Arc::new(Column::U32(vec![0, 1, 99, 0]));
+        let bad = Column::Record { ty: *ty, fields };
+        let error = fixture
+            .run("normalColor", &[], 0, &[rays.view(), bad.view()])
+            .unwrap_err();
+        assert!(error.0.contains("triangle 99"), "{error}");
+    }
+}
