@@ -1,6 +1,8 @@
-//! Pass 5: common-subexpression elimination. Within one block, an op that
-//! applies the same primitive and functor to the same values as an earlier op
-//! (no input rewritten in between) reuses the earlier op's results.
+//! Pass 5: common-subexpression elimination. An op that applies the same
+//! primitive and functor to the same values as an earlier op (no input
+//! rewritten in between) reuses the earlier op's results. Nested blocks see
+//! what their enclosing blocks computed before them; a loop body sees none of
+//! the values its iterations rewrite.
 
 use super::ir::*;
 use super::typecheck::node_writes;
@@ -14,7 +16,7 @@ pub fn eliminate_common_subexpressions(body: &mut Vec<Node>, vars: &mut [VarInfo
         }
     });
     let mut renames: Vec<(VarId, VarId)> = Vec::new();
-    cse_block(body, &definitions, &mut renames);
+    cse_block(body, &definitions, &mut renames, Available::default());
     for (from, to) in renames {
         rename_reads(body, from, to);
         for info in vars.iter_mut() {
@@ -25,10 +27,25 @@ pub fn eliminate_common_subexpressions(body: &mut Vec<Node>, vars: &mut [VarInfo
     }
 }
 
-fn cse_block(nodes: &mut Vec<Node>, definitions: &[u32], renames: &mut Vec<(VarId, VarId)>) {
-    // How many times each variable has been written so far in this block.
-    let mut generation: HashMap<VarId, u32> = HashMap::new();
-    let mut seen: HashMap<String, Vec<(VarId, u32)>> = HashMap::new();
+/// What is computed at a point of the program.
+#[derive(Clone, Default)]
+struct Available {
+    /// How many times each variable has been written so far.
+    generation: HashMap<VarId, u32>,
+    /// Op keys and their results with the generation they were computed at.
+    seen: HashMap<String, Vec<(VarId, u32)>>,
+}
+
+fn cse_block(
+    nodes: &mut Vec<Node>,
+    definitions: &[u32],
+    renames: &mut Vec<(VarId, VarId)>,
+    available: Available,
+) {
+    let Available {
+        mut generation,
+        mut seen,
+    } = available;
     let mut kept = Vec::with_capacity(nodes.len());
     for mut node in nodes.drain(..) {
         // Earlier eliminations rename reads before the key is computed.
@@ -43,9 +60,15 @@ fn cse_block(nodes: &mut Vec<Node>, definitions: &[u32], renames: &mut Vec<(VarI
                         .iter()
                         .all(|(v, g)| generation.get(v).copied().unwrap_or(0) == *g)
                 });
-                // Only single-definition results can be renamed program-wide.
+                // Only single-definition results can be renamed program-wide, and
+                // only to single-definition results: a slot may be rewritten later.
                 if let Some(previous) = reusable {
-                    if op.outputs.iter().all(|o| definitions[o.0 as usize] == 1) {
+                    if op
+                        .outputs
+                        .iter()
+                        .chain(previous.iter().map(|(o, _)| o))
+                        .all(|o| definitions[o.0 as usize] == 1)
+                    {
                         for (new, (old, _)) in op.outputs.iter().zip(previous) {
                             renames.push((*new, *old));
                         }
@@ -59,16 +82,25 @@ fn cse_block(nodes: &mut Vec<Node>, definitions: &[u32], renames: &mut Vec<(VarI
                 seen.insert(key, outputs);
             }
             Node::For { body, .. } | Node::While { body, .. } => {
-                cse_block(body, definitions, renames);
+                // Values rewritten by any iteration differ from those before the loop.
                 bump_nested_writes(body, &mut generation);
+                let inside = Available {
+                    generation: generation.clone(),
+                    seen: seen.clone(),
+                };
+                cse_block(body, definitions, renames, inside);
             }
             Node::If {
                 then_body,
                 else_body,
                 ..
             } => {
-                cse_block(then_body, definitions, renames);
-                cse_block(else_body, definitions, renames);
+                let inside = Available {
+                    generation: generation.clone(),
+                    seen: seen.clone(),
+                };
+                cse_block(then_body, definitions, renames, inside.clone());
+                cse_block(else_body, definitions, renames, inside);
                 bump_nested_writes(then_body, &mut generation);
                 bump_nested_writes(else_body, &mut generation);
             }
@@ -129,7 +161,7 @@ pub fn rename_reads(nodes: &mut [Node], from: VarId, to: VarId) {
                 .iter_mut()
                 .for_each(|op| rename_in_op(op, from, to)),
             Node::Host { expr, .. } => rename_in_host(expr, from, to),
-            Node::Alias { src, .. } => swap(src),
+            Node::Alias { src, .. } | Node::View { src, .. } => swap(src),
             Node::For {
                 start, end, body, ..
             } => {

@@ -7,6 +7,7 @@
 
 use super::ir::*;
 use super::typecheck::node_writes;
+use dpp_dsl::ast::BinaryOp;
 use std::collections::HashSet;
 
 pub fn form_stages(body: Vec<Node>, vars: &[VarInfo], fuse: bool) -> Vec<Node> {
@@ -29,7 +30,23 @@ pub fn form_stages(body: Vec<Node>, vars: &[VarInfo], fuse: bool) -> Vec<Node> {
             usage.outputs.insert(*var);
         }
     });
-    let former = StageFormer { vars, usage, fuse };
+    let mut mentioned_by = vec![Vec::new(); vars.len()];
+    for (index, info) in vars.iter().enumerate() {
+        if let Some(len) = &info.len {
+            len.visit_vars(&mut |v| {
+                if v.0 as usize != index {
+                    mentioned_by[v.0 as usize].push(VarId(index as u32));
+                }
+            });
+        }
+    }
+    let mut former = StageFormer {
+        vars,
+        usage,
+        fuse,
+        mentioned_by,
+        stale: HashSet::new(),
+    };
     former.block(body)
 }
 
@@ -44,6 +61,11 @@ struct StageFormer<'a> {
     vars: &'a [VarInfo],
     usage: Usage,
     fuse: bool,
+    /// For each variable, the variables whose symbolic length mentions it.
+    mentioned_by: Vec<Vec<VarId>>,
+    /// Variables whose symbolic length no longer holds at this point of the
+    /// program: a slot or host value it mentions was written since.
+    stale: HashSet<VarId>,
 }
 
 /// A stage being built.
@@ -54,25 +76,96 @@ struct OpenStage {
     locals: HashSet<VarId>,
 }
 
+impl OpenStage {
+    /// Whether an op of the stage reads `var`.
+    fn reads(&self, var: VarId) -> bool {
+        self.ops
+            .iter()
+            .any(|op| node_reads(&Node::Op(op.clone())).contains(&var))
+    }
+}
+
 impl StageFormer<'_> {
-    fn block(&self, nodes: Vec<Node>) -> Vec<Node> {
+    /// `var` gets a new value: its own length holds again, and the lengths that
+    /// mention it no longer do.
+    fn wrote(&mut self, var: VarId) {
+        self.stale.remove(&var);
+        for &other in &self.mentioned_by[var.0 as usize] {
+            self.stale.insert(other);
+        }
+    }
+
+    fn block(&mut self, nodes: Vec<Node>) -> Vec<Node> {
         let mut out = Vec::new();
+        // The stage being built, and a second one over another length whose ops
+        // share nothing with it: it runs first, so an op between a map and its
+        // scatter (`into: fill(m, 0)`) does not split them.
         let mut open: Option<OpenStage> = None;
+        let mut side: Option<OpenStage> = None;
         for node in nodes {
             match node {
+                // A field of an array made before the open stages is a view: no
+                // stage, no copy (placed before them; they do not touch its source).
+                Node::Op(op)
+                    if matches!(op.kind, OpKind::Field { .. })
+                        && [&open, &side].iter().all(|stage| {
+                            !stage.as_ref().is_some_and(|s| {
+                                s.locals.contains(&op.inputs[0]) || s.reads(op.outputs[0])
+                            })
+                        }) =>
+                {
+                    self.wrote(op.outputs[0]);
+                    let OpKind::Field { field } = op.kind else {
+                        unreachable!()
+                    };
+                    out.push(Node::View {
+                        dst: op.outputs[0],
+                        src: op.inputs[0],
+                        field,
+                    });
+                }
                 Node::Op(op) => {
-                    if let Some(stage) = open.take() {
-                        match self.joins(&stage, &op) {
-                            Ok(()) => open = Some(stage),
-                            Err(barrier) => out.push(self.close(stage, barrier)),
+                    let joins_open = open.as_ref().map(|stage| self.joins(stage, &op));
+                    let independent = open
+                        .as_ref()
+                        .is_some_and(|stage| self.independent_of(stage, &op));
+                    let side_fits = side
+                        .as_ref()
+                        .is_some_and(|stage| self.joins(stage, &op).is_ok());
+                    let into_side = match (joins_open, independent, side.is_some()) {
+                        (Some(Ok(())), _, _) => false,
+                        _ if independent && side_fits => true,
+                        (Some(Err(_)), true, false) => true,
+                        // It needs the open stage's results: that stage ends, and the
+                        // side stage (independent of it) carries on as the open one.
+                        _ if side_fits => {
+                            if let Some(stage) = open.take() {
+                                out.extend(self.close(stage, Barrier::LengthChange));
+                            }
+                            open = side.take();
+                            false
                         }
-                    }
-                    let stage = open.get_or_insert_with(|| OpenStage {
+                        (joins_open, _, _) => {
+                            let barrier = match joins_open {
+                                Some(Err(barrier)) => barrier,
+                                _ => Barrier::ControlFlow,
+                            };
+                            for stage in [side.take(), open.take()].into_iter().flatten() {
+                                out.extend(self.close(stage, barrier));
+                            }
+                            false
+                        }
+                    };
+                    let target = if into_side { &mut side } else { &mut open };
+                    let stage = target.get_or_insert_with(|| OpenStage {
                         index_space: self.index_space(&op),
                         ops: Vec::new(),
                         locals: HashSet::new(),
                     });
                     stage.locals.extend(op.outputs.iter().copied());
+                    for &output in &op.outputs {
+                        self.wrote(output);
+                    }
                     let sink = match op.kind {
                         OpKind::Scan { .. } => Some(Barrier::Scan),
                         OpKind::Reduce { .. } => Some(Barrier::Reduce),
@@ -80,15 +173,43 @@ impl StageFormer<'_> {
                         _ => None,
                     };
                     stage.ops.push(op);
-                    if !self.fuse {
-                        out.push(self.close(open.take().unwrap(), Barrier::Unfused));
-                    } else if let Some(barrier) = sink {
-                        out.push(self.close(open.take().unwrap(), barrier));
+                    let barrier = if self.fuse {
+                        sink
+                    } else {
+                        Some(Barrier::Unfused)
+                    };
+                    if let Some(barrier) = barrier {
+                        // The side stage always runs before the open one.
+                        if let Some(stage) = side.take() {
+                            let side_barrier = if into_side {
+                                barrier
+                            } else {
+                                Barrier::LengthChange
+                            };
+                            out.extend(self.close(stage, side_barrier));
+                        }
+                        if !into_side {
+                            if let Some(stage) = open.take() {
+                                out.extend(self.close(stage, barrier));
+                            }
+                        }
                     }
                 }
                 other => {
-                    if let Some(stage) = open.take() {
-                        out.push(self.close(stage, Barrier::ControlFlow));
+                    for stage in [side.take(), open.take()].into_iter().flatten() {
+                        out.extend(self.close(stage, Barrier::ControlFlow));
+                    }
+                    // A loop body runs again after its own writes: what it writes
+                    // is rewritten before its first node too.
+                    for var in node_writes(&other) {
+                        self.wrote(var);
+                    }
+                    if let Node::For { body, .. } | Node::While { body, .. } = &other {
+                        let mut written = Vec::new();
+                        walk_nodes(body, &mut |node| written.extend(node_writes(node)));
+                        for var in written {
+                            self.wrote(var);
+                        }
                     }
                     out.push(match other {
                         Node::For {
@@ -125,25 +246,21 @@ impl StageFormer<'_> {
                 }
             }
         }
-        if let Some(stage) = open.take() {
-            out.push(self.close(stage, Barrier::ControlFlow));
+        for stage in [side.take(), open.take()].into_iter().flatten() {
+            out.extend(self.close(stage, Barrier::ControlFlow));
         }
         out
     }
 
-    fn len_of(&self, var: VarId) -> HostExpr {
-        self.vars[var.0 as usize]
-            .len
-            .clone()
-            .unwrap_or(HostExpr::Len(var))
-    }
-
-    /// `len(v)` replaced by `v`'s symbolic length wherever type checking knows it,
-    /// so `iota(len(keep))` and a map over `keep` have the same index space.
+    /// `len(v)` replaced by `v`'s symbolic length wherever type checking knows it
+    /// and it still holds, so `iota(len(keep))` and a map over `keep` have the
+    /// same index space.
     fn canonical(&self, expr: HostExpr) -> HostExpr {
         match expr {
             HostExpr::Len(v) => match &self.vars[v.0 as usize].len {
-                Some(len) if *len != HostExpr::Len(v) => self.canonical(len.clone()),
+                Some(len) if *len != HostExpr::Len(v) && !self.stale.contains(&v) => {
+                    self.canonical(len.clone())
+                }
                 _ => HostExpr::Len(v),
             },
             HostExpr::Unary(op, e) => HostExpr::Unary(op, Box::new(self.canonical(*e))),
@@ -164,16 +281,23 @@ impl StageFormer<'_> {
         self.raw_index_space(op).map(|e| self.canonical(e))
     }
 
+    /// From the first input's length, not the output's: an output may be a slot,
+    /// whose recorded length is only `len` of its previous value.
     fn raw_index_space(&self, op: &Op) -> Option<HostExpr> {
+        let input = || Some(HostExpr::Len(*op.inputs.first()?));
         match &op.kind {
             OpKind::Iota { count } | OpKind::Fill { count, .. } => Some(count.clone()),
-            _ => op.outputs.first().and_then(|o| match op.kind {
-                OpKind::Map
-                | OpKind::Field { .. }
-                | OpKind::GroupGather { .. }
-                | OpKind::Expand { .. } => self.vars[o.0 as usize].len.clone(),
-                _ => op.inputs.first().map(|i| self.len_of(*i)),
-            }),
+            OpKind::GroupGather { group } => Some(HostExpr::Binary(
+                BinaryOp::Div,
+                Box::new(input()?),
+                Box::new(group.clone()),
+            )),
+            OpKind::Expand { fanout } => Some(HostExpr::Binary(
+                BinaryOp::Mul,
+                Box::new(input()?),
+                Box::new(fanout.clone()),
+            )),
+            _ => input(),
         }
     }
 
@@ -206,7 +330,30 @@ impl StageFormer<'_> {
         Ok(())
     }
 
-    fn close(&self, stage: OpenStage, barrier: Barrier) -> Node {
+    /// Whether `op` cannot join `stage` because it runs over another length, and
+    /// may run before the whole stage: it reads nothing the stage writes and
+    /// writes nothing the stage reads or writes.
+    fn independent_of(&self, stage: &OpenStage, op: &Op) -> bool {
+        if !self.fuse
+            || matches!(
+                op.kind,
+                OpKind::GroupGather { .. } | OpKind::Expand { .. } | OpKind::Field { .. }
+            )
+            || self.joins(stage, op) != Err(Barrier::LengthChange)
+        {
+            return false;
+        }
+        let reads = node_reads(&Node::Op(op.clone()));
+        !reads.iter().any(|v| stage.locals.contains(v))
+            && !op
+                .outputs
+                .iter()
+                .any(|o| stage.locals.contains(o) || stage.reads(*o))
+    }
+
+    /// The finished stage, then views of record fields it computed that later
+    /// nodes read (the record itself is materialised instead of the field).
+    fn close(&self, stage: OpenStage, barrier: Barrier) -> Vec<Node> {
         let mut reads_in_stage = vec![0u32; 0];
         reads_in_stage.resize(self.vars.len(), 0);
         for op in &stage.ops {
@@ -225,6 +372,7 @@ impl StageFormer<'_> {
         let mut reads_indexed = Vec::new();
         let mut reads_uniform = Vec::new();
         let mut written: HashSet<VarId> = HashSet::new();
+        let mut views = Vec::new();
         for op in &stage.ops {
             let (direct, indexed): (Vec<VarId>, Vec<VarId>) = match &op.kind {
                 OpKind::Gather => (vec![op.inputs[0]], vec![op.inputs[1]]),
@@ -272,12 +420,25 @@ impl StageFormer<'_> {
                         op.kind,
                         OpKind::Reduce { .. } | OpKind::Scan { .. } | OpKind::Scatter { .. }
                     );
-                if keep && !materialises.contains(&o) {
+                if !keep {
+                    continue;
+                }
+                if let OpKind::Field { field } = &op.kind {
+                    let src = op.inputs[0];
+                    if !materialises.contains(&src) && stage.locals.contains(&src) {
+                        materialises.push(src);
+                    }
+                    views.push(Node::View {
+                        dst: o,
+                        src,
+                        field: field.clone(),
+                    });
+                } else if !materialises.contains(&o) {
                     materialises.push(o);
                 }
             }
         }
-        Node::Stage(Stage {
+        let mut nodes = vec![Node::Stage(Stage {
             ops: stage.ops,
             index_space: stage.index_space,
             reads_direct,
@@ -285,7 +446,9 @@ impl StageFormer<'_> {
             reads_uniform,
             materialises,
             barrier,
-        })
+        })];
+        nodes.extend(views);
+        nodes
     }
 }
 

@@ -298,6 +298,12 @@ pub enum Node {
         #[serde(skip)]
         span: Span,
     },
+    /// `dst = src.field`: a view of one field of a record array; copies nothing.
+    View {
+        dst: VarId,
+        src: VarId,
+        field: String,
+    },
     /// Rebinding an array name to another array (no copy: arrays are immutable).
     Alias {
         dst: VarId,
@@ -442,7 +448,7 @@ pub fn node_reads(node: &Node) -> Vec<VarId> {
             }
         }
         Node::Host { expr, .. } => host(expr, &mut reads),
-        Node::Alias { src, .. } => reads.push(*src),
+        Node::Alias { src, .. } | Node::View { src, .. } => reads.push(*src),
         Node::For { start, end, .. } => {
             host(start, &mut reads);
             host(end, &mut reads);

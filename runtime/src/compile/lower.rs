@@ -10,7 +10,7 @@ use crate::host::HostValue;
 use crate::types::HostType;
 use dpp_dsl::ast::{self, Block, Call, ExprKind, Ident, StmtKind};
 use dpp_dsl::{did_you_mean, Diagnostic, Span};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 pub struct Lowered {
     pub vars: Vec<VarInfo>,
@@ -33,6 +33,7 @@ pub fn lower_program(
         fn_stack: Vec::new(),
         outputs: Vec::new(),
         params: HashMap::new(),
+        inlined: HashSet::new(),
     };
     let mut params = Vec::new();
     let mut body = Vec::new();
@@ -50,6 +51,7 @@ pub fn lower_program(
     lowerer.scopes.push(Scope::new(ScopeKind::Function));
     lowerer.lower_block_in_scope(&program.pipeline.body, &mut body);
     lowerer.scopes.pop();
+    lowerer.check_uncalled_fns();
     Lowered {
         vars: lowerer.vars,
         params,
@@ -62,12 +64,15 @@ pub fn lower_program(
 enum Binding {
     Array(VarId),
     Host(VarId),
+    /// A parameter of a fn checked without a call: its kind and type are
+    /// unknown, so whatever reads it is silently unknown too.
+    Poisoned(VarId),
 }
 
 impl Binding {
     fn var(self) -> VarId {
         match self {
-            Binding::Array(v) | Binding::Host(v) => v,
+            Binding::Array(v) | Binding::Host(v) | Binding::Poisoned(v) => v,
         }
     }
 }
@@ -115,6 +120,8 @@ struct Lowerer<'a, 'p> {
     fn_stack: Vec<String>,
     outputs: Vec<String>,
     params: HashMap<String, VarId>,
+    /// Names of the fns inlined at least once.
+    inlined: HashSet<String>,
 }
 
 impl Lowerer<'_, '_> {
@@ -342,7 +349,7 @@ impl Lowerer<'_, '_> {
                         format!("{} names bound to {} values", targets.len(), vars.len()),
                         span,
                     ));
-                    return;
+                    return self.poison(targets);
                 }
                 vars.into_iter().map(Value::Array).collect()
             }
@@ -355,9 +362,9 @@ impl Lowerer<'_, '_> {
                     ),
                     targets[0].span,
                 ));
-                return;
+                return self.poison(targets);
             }
-            Value::Error => return,
+            Value::Error => return self.poison(targets),
             single if targets.len() == 1 => vec![single],
             _ => {
                 let span = targets[0].span.to(targets[targets.len() - 1].span);
@@ -366,11 +373,24 @@ impl Lowerer<'_, '_> {
                     format!("{} names bound to one value", targets.len()),
                     span,
                 ));
-                return;
+                return self.poison(targets);
             }
         };
         for (target, value) in targets.iter().zip(values) {
             self.bind(target, value, first_new_var, nodes_before, out);
+        }
+    }
+
+    /// Declares names whose value is in error, so that reading them later is
+    /// silent instead of a second, misleading "unknown name".
+    fn poison(&mut self, targets: &[Ident]) {
+        for target in targets {
+            let placeholder = self.new_var(&target.name, target.span, VarType::Unknown);
+            self.scopes
+                .last_mut()
+                .expect("lowering always has a scope")
+                .names
+                .insert(target.name.clone(), Binding::Poisoned(placeholder));
         }
     }
 
@@ -393,7 +413,9 @@ impl Lowerer<'_, '_> {
             ));
             return;
         }
-        let mut existing = self.lookup(&target.name);
+        let mut existing = self
+            .lookup(&target.name)
+            .filter(|(binding, _)| !matches!(binding, Binding::Poisoned(_)));
         let is_param =
             existing.is_some_and(|(b, _)| self.params.get(&target.name) == Some(&b.var()));
         if is_param && !self.fn_stack.is_empty() {
@@ -427,7 +449,9 @@ impl Lowerer<'_, '_> {
                         self.kind_change(target, "a host scalar", "an array");
                         return;
                     }
-                    None => self.new_var(&target.name, target.span, VarType::Unknown),
+                    None | Some(Binding::Poisoned(_)) => {
+                        self.new_var(&target.name, target.span, VarType::Unknown)
+                    }
                 };
                 // A value computed by this very statement is written straight into
                 // the binding's slot instead of through an alias.
@@ -445,7 +469,9 @@ impl Lowerer<'_, '_> {
                         self.kind_change(target, "an array", "a host scalar");
                         return;
                     }
-                    None => self.new_var(&target.name, target.span, VarType::Unknown),
+                    None | Some(Binding::Poisoned(_)) => {
+                        self.new_var(&target.name, target.span, VarType::Unknown)
+                    }
                 };
                 out.push(Node::Host {
                     dst,
@@ -496,10 +522,16 @@ impl Lowerer<'_, '_> {
         self.error(diagnostic);
     }
 
+    /// Stands for a host operand already diagnosed: a variable that is never
+    /// typed, so type checking stays silent about the expressions around it.
+    fn error_host(&mut self, span: Span) -> HostExpr {
+        HostExpr::Var(self.new_temp(span))
+    }
+
     fn lower_host(&mut self, expr: &ast::Expr, out: &mut Vec<Node>) -> HostExpr {
         match self.lower_expr(expr, out) {
             Value::Host(e) => e,
-            Value::Error => HostExpr::Const(HostValue::Int(0)),
+            Value::Error => self.error_host(expr.span),
             Value::Array(_) | Value::Tuple(_) => {
                 self.error(
                     Diagnostic::error(
@@ -509,7 +541,7 @@ impl Lowerer<'_, '_> {
                     )
                     .with_help("arrays become scalars through `reduce<f>(a)` or `len(a)`"),
                 );
-                HostExpr::Const(HostValue::Int(0))
+                self.error_host(expr.span)
             }
         }
     }
@@ -552,6 +584,7 @@ impl Lowerer<'_, '_> {
                 match self.lookup(&name.name) {
                     Some((Binding::Array(v), _)) => Value::Array(v),
                     Some((Binding::Host(v), _)) => Value::Host(HostExpr::Var(v)),
+                    Some((Binding::Poisoned(_), _)) => Value::Error,
                     None => {
                         if self.library.uniforms.records.contains_key(&name.name) {
                             self.error(Diagnostic::error(
@@ -810,6 +843,51 @@ impl Lowerer<'_, '_> {
         }
     }
 
+    /// A fn no call reaches is still checked for what does not depend on its
+    /// arguments' types (unknown names, functors, arities), then discarded.
+    fn check_uncalled_fns(&mut self) {
+        let mut uncalled: Vec<&ast::FnItem> = self
+            .program
+            .fns
+            .values()
+            .copied()
+            .filter(|f| !self.inlined.contains(&f.name.name))
+            .collect();
+        uncalled.sort_by_key(|f| (f.span.file, f.span.start));
+        let vars_before = self.vars.len();
+        for function in uncalled {
+            let placeholder =
+                self.new_var(&function.name.name, function.name.span, VarType::Unknown);
+            let mut scope = Scope::new(ScopeKind::Function);
+            for param in &function.params {
+                scope
+                    .names
+                    .insert(param.name.clone(), Binding::Poisoned(placeholder));
+            }
+            self.fn_stack.push(function.name.name.clone());
+            self.scopes.push(scope);
+            let mut discarded = Vec::new();
+            let stmts = &function.body.stmts;
+            for (index, stmt) in stmts.iter().enumerate() {
+                match &stmt.kind {
+                    StmtKind::Return(expr) if index + 1 == stmts.len() => {
+                        self.lower_expr(expr, &mut discarded);
+                    }
+                    _ => self.lower_block_in_scope(
+                        &Block {
+                            stmts: vec![stmt.clone()],
+                            span: stmt.span,
+                        },
+                        &mut discarded,
+                    ),
+                }
+            }
+            self.scopes.pop();
+            self.fn_stack.pop();
+        }
+        self.vars.truncate(vars_before);
+    }
+
     fn check_count(&mut self, what: &str, expected: usize, found: usize, span: Span) -> bool {
         if expected == found {
             return true;
@@ -828,14 +906,14 @@ impl Lowerer<'_, '_> {
     fn expect_host(&mut self, (value, span): (Value, Span)) -> HostExpr {
         match value {
             Value::Host(e) => e,
-            Value::Error => HostExpr::Const(HostValue::Int(0)),
+            Value::Error => self.error_host(span),
             _ => {
                 self.error(Diagnostic::error(
                     "dpp::expected-scalar",
                     "expected a host scalar, found an array",
                     span,
                 ));
-                HostExpr::Const(HostValue::Int(0))
+                self.error_host(span)
             }
         }
     }
@@ -940,6 +1018,7 @@ impl Lowerer<'_, '_> {
             };
             scope.names.insert(param.name.clone(), binding);
         }
+        self.inlined.insert(name.clone());
         self.fn_stack.push(name.clone());
         self.scopes.push(scope);
         let stmts = &function.body.stmts;
@@ -1325,8 +1404,10 @@ fn monoid(signature: &Signature) -> Option<crate::functor::MonoidOp> {
     }
 }
 
-/// Renames output `from` of the op that defines it (among `nodes`) to `to`,
-/// unless another node there reads it.
+/// Renames output `from` of the op that defines it to `to`, when that op is the
+/// last of `nodes` (the statement's) and no other node there reads `from`.
+/// Renaming an earlier op would lose a later write of `from` (a fn's branch or
+/// loop rebinding its result) or change what the later nodes read of `to`.
 fn rename_output(nodes: &mut [Node], from: VarId, to: VarId) -> bool {
     let mut read = false;
     walk_nodes(nodes, &mut |node| {
@@ -1335,12 +1416,10 @@ fn rename_output(nodes: &mut [Node], from: VarId, to: VarId) -> bool {
     if read {
         return false;
     }
-    for node in nodes.iter_mut().rev() {
-        if let Node::Op(op) = node {
-            if let Some(output) = op.outputs.iter_mut().find(|o| **o == from) {
-                *output = to;
-                return true;
-            }
+    if let Some(Node::Op(op)) = nodes.last_mut() {
+        if let Some(output) = op.outputs.iter_mut().find(|o| **o == from) {
+            *output = to;
+            return true;
         }
     }
     false

@@ -111,6 +111,14 @@ fn compile(
     let mut lowered = lower::lower_program(&program, library, &mut diagnostics);
     typecheck::typecheck(&mut lowered.vars, &lowered.body, library, &mut diagnostics);
     let params = evaluate_params(&lowered, &options.overrides, &mut sources, &mut diagnostics);
+    // A fn inlined at several calls reports each of its errors once.
+    let mut unique: Vec<Diagnostic> = Vec::with_capacity(diagnostics.len());
+    for diagnostic in diagnostics {
+        if !unique.contains(&diagnostic) {
+            unique.push(diagnostic);
+        }
+    }
+    let diagnostics = unique;
     if !diagnostics.is_empty() {
         return fail(sources, diagnostics);
     }

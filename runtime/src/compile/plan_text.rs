@@ -79,6 +79,10 @@ impl Printer<'_> {
                     let line = format!("let {} = {}", self.typed(*dst), host_text(expr, self.plan));
                     self.line(depth, &line);
                 }
+                Node::View { dst, src, field } => {
+                    let line = format!("view {} = {}.{field}", self.name(*dst), self.name(*src));
+                    self.line(depth, &line);
+                }
                 Node::Alias { dst, src } => {
                     let line = format!("let {} = {}", self.name(*dst), self.name(*src));
                     self.line(depth, &line);
@@ -172,7 +176,7 @@ impl Printer<'_> {
             format!("({})", outputs.join(", "))
         };
         if let OpKind::Field { field } = &op.kind {
-            return format!("{outputs} = {}.{field}", self.name(op.inputs[0]));
+            return format!("{outputs} = field {field} of {}", self.name(op.inputs[0]));
         }
         format!("{outputs} = {}({})", op.label(), args.join(", "))
     }

@@ -34,7 +34,7 @@ pub fn node_writes(node: &Node) -> Vec<VarId> {
     match node {
         Node::Op(op) => op.outputs.clone(),
         Node::Stage(stage) => stage.ops.iter().flat_map(|op| op.outputs.clone()).collect(),
-        Node::Host { dst, .. } | Node::Alias { dst, .. } => vec![*dst],
+        Node::Host { dst, .. } | Node::Alias { dst, .. } | Node::View { dst, .. } => vec![*dst],
         Node::For { var, .. } => vec![*var],
         _ => Vec::new(),
     }
@@ -168,7 +168,7 @@ impl Checker<'_> {
                     self.check_nodes(then_body);
                     self.check_nodes(else_body);
                 }
-                Node::Break | Node::Output { .. } => {}
+                Node::Break | Node::Output { .. } | Node::View { .. } => {}
             }
         }
     }

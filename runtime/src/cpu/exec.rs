@@ -234,6 +234,26 @@ impl<'a> Executor<'a> {
                     let value = self.eval(expr)?;
                     self.hosts[dst.0 as usize] = Some(value);
                 }
+                Node::View { dst, src, field } => {
+                    let column = self.array(*src)?;
+                    let view = match column.as_ref() {
+                        Column::Record { ty, .. } => self
+                            .context
+                            .library
+                            .records
+                            .get(*ty)
+                            .field_index(field)
+                            .and_then(|i| column.field(i)),
+                        _ => None,
+                    };
+                    let view = view.ok_or_else(|| {
+                        error(format!(
+                            "`{}` has no field `{field}`",
+                            self.plan.var(*src).name
+                        ))
+                    })?;
+                    self.arrays[dst.0 as usize] = Some(view);
+                }
                 Node::Alias { dst, src } => {
                     let value = self.array(*src)?.clone();
                     self.arrays[dst.0 as usize] = Some(value);
@@ -311,24 +331,6 @@ impl<'a> Executor<'a> {
     /// Runs one stage; returns the number of elements it ran over.
     fn stage(&mut self, stage: &'a Stage) -> Result<usize, RunError> {
         let head = &stage.ops[0];
-        // A stage that only views a field of an existing array copies nothing.
-        if let ([op], OpKind::Field { field }) = (stage.ops.as_slice(), &head.kind) {
-            let src = self.array(op.inputs[0])?;
-            let Column::Record { ty, .. } = src.as_ref() else {
-                return Err(error("field of a non-record array"));
-            };
-            let index = self
-                .context
-                .library
-                .records
-                .get(*ty)
-                .field_index(field)
-                .expect("type-checked field");
-            let column = src.field(index).expect("record field");
-            self.arrays[op.outputs[0].0 as usize] = Some(column);
-            return Ok(0);
-        }
-
         let mut host_values = Vec::with_capacity(stage.ops.len());
         for op in &stage.ops {
             let named = op

@@ -1,0 +1,876 @@
+//! Pass 6, `fuse`: ops grouped into stages by the rules of spec §5.
+//!
+//! 1. `map → map` over the same index space share a stage; an intermediate
+//!    that nothing else reads is not materialised, one read elsewhere is.
+//! 2. `gather(idx, src) → map`: the indexed read moves into the consumer.
+//! 3. `map → scatter`, `map → reduce`, `map → scan` run in one stage.
+//! 4. Barriers: scan, reduce, a length change, a loop or branch boundary.
+//!
+//! `check!(source, @"…")` shows the fused plan's text. It also checks that the
+//! unfused plan (`--no-fuse`) has one op per stage and the same ops, and RUNS
+//! both: their outputs must be identical, and are listed after the plan.
+
+use dpp_runtime::compile::ir::Plan;
+use dpp_runtime::compile::plan_text::plan_to_text;
+use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
+use dpp_runtime::*;
+use std::path::{Path, PathBuf};
+
+fn library() -> FunctorLibrary {
+    let mut library = FunctorLibrary::default();
+    dpp_runtime::generic::register_generic_functors(&mut library);
+    library
+}
+
+/// Removes the indentation common to every non-blank line, and a leading newline.
+fn trim_indent(text: &str) -> String {
+    let text = text.strip_prefix('\n').unwrap_or(text);
+    let indent = text
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| l.len() - l.trim_start().len())
+        .min()
+        .unwrap_or(0);
+    text.lines()
+        .map(|l| if l.len() >= indent { &l[indent..] } else { "" })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// A file beside `pipelines/prelude.dpp`, so that `use "prelude.dpp"` works.
+fn path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../pipelines/fuse_test.dpp")
+}
+
+fn column_text(column: &Column) -> String {
+    match column {
+        Column::Bool(v) => format!("{v:?}"),
+        Column::U32(v) => format!("{v:?}"),
+        Column::I32(v) => format!("{v:?}"),
+        Column::F32(v) => format!("{v:?}"),
+        other => format!("{other:?}"),
+    }
+}
+
+/// Runs `plan`; returns `name = value` lines, or the run-time error.
+fn run(plan: &Plan, library: &FunctorLibrary) -> String {
+    let uniforms = Uniforms::default();
+    let context = RunContext {
+        library,
+        uniforms: &uniforms,
+        resources: &(),
+        chunk: 64,
+    };
+    match run_plan(plan, &context) {
+        Ok(result) => result
+            .outputs
+            .iter()
+            .map(|(name, value)| match value {
+                OutputValue::Array(column) => format!("{name} = {}\n", column_text(column)),
+                OutputValue::Host(value) => format!("{name} = {value}\n"),
+            })
+            .collect(),
+        Err(error) => format!("run-time error: {}\n", error.message),
+    }
+}
+
+fn compile(source: &str, fuse: bool, library: &FunctorLibrary) -> Plan {
+    let options = CompileOptions {
+        fuse,
+        ..CompileOptions::default()
+    };
+    compile_text(&path(), source, library, &options).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// `check!(source, @"expected")`: [`report`] against an inline snapshot.
+macro_rules! check {
+    ($source:expr, @$expected:literal) => {
+        insta::assert_snapshot!(report($source), @$expected)
+    };
+}
+
+/// The fused plan's text and the outputs of the fused and unfused runs.
+fn report(source: &str) -> String {
+    let source = trim_indent(source);
+    let library = library();
+    let fused = compile(&source, true, &library);
+    let unfused = compile(&source, false, &library);
+
+    // `--no-fuse`: one op per stage, the same ops (fusion may run an independent
+    // op of another length before a stage, so only the multiset must match).
+    let labels = |plan: &Plan| -> Vec<String> {
+        let mut labels: Vec<String> = plan
+            .stages()
+            .iter()
+            .flat_map(|s| s.ops.iter().map(|op| op.label()))
+            .collect();
+        labels.sort();
+        labels
+    };
+    assert!(unfused.stages().iter().all(|s| s.ops.len() == 1));
+    assert_eq!(labels(&fused), labels(&unfused));
+
+    let mut text = plan_to_text(&fused, &library);
+    let outputs = run(&fused, &library);
+    let unfused_outputs = run(&unfused, &library);
+    assert_eq!(
+        outputs, unfused_outputs,
+        "fused and unfused runs differ\n{text}"
+    );
+    text.push_str("---\n");
+    text.push_str(&outputs);
+    text
+}
+
+#[test]
+fn rule1_a_map_chain_is_one_stage_without_its_intermediates() {
+    check!(
+        r#"
+        param n = 6
+        pipeline p {
+            a = iota(n) → map<toF32>
+            b = map<add>(a, a)
+            c = map<mul>(b, b)
+            out d = map<sub>(c, b)
+        }
+        "#,
+        @"
+    pipeline p (fused, 1 stages)
+    param n: int = 6
+    let n: int = 6
+    stage 1 [iota → map<toF32> → map<add> → map<mul> → map<sub>] {
+      over n
+      %1 = iota(n)
+      a = map<toF32>(%1)
+      b = map<add>(a, a)
+      c = map<mul>(b, b)
+      d = map<sub>(c, b)
+      reads direct: -; indexed: -; uniform: n
+      materialises d: f32
+      ends at control flow
+    }
+    out d = d
+    ---
+    d = [0.0, 2.0, 12.0, 30.0, 56.0, 90.0]
+    "
+    );
+}
+
+#[test]
+fn rule1_an_intermediate_read_elsewhere_is_materialised() {
+    // `b` is read again after the stage ends (at the output): it is
+    // materialised; `a` is not.
+    check!(
+        r#"
+        param n = 6
+        pipeline p {
+            a = iota(n) → map<toF32>
+            b = map<add>(a, a)
+            out c = map<mul>(b, b)
+            out total = reduce<add>(b)
+        }
+        "#,
+        @"
+    pipeline p (fused, 2 stages)
+    param n: int = 6
+    let n: int = 6
+    stage 1 [iota → map<toF32> → map<add> → map<mul>] {
+      over n
+      %1 = iota(n)
+      a = map<toF32>(%1)
+      b = map<add>(a, a)
+      c = map<mul>(b, b)
+      reads direct: -; indexed: -; uniform: n
+      materialises b: f32, c: f32
+      ends at control flow
+    }
+    out c = c
+    stage 2 [reduce<add>] {
+      over n
+      %8 = reduce<add>(b)
+      reads direct: b: f32; indexed: -; uniform: -
+      materialises %8: float
+      ends at reduce result read by the host
+    }
+    let total: float = %8
+    out total = total
+    ---
+    c = [0.0, 4.0, 16.0, 36.0, 64.0, 100.0]
+    total = 30.0
+    "
+    );
+}
+
+#[test]
+fn rule1_maps_over_different_lengths_do_not_fuse() {
+    check!(
+        r#"
+        pipeline p {
+            a = iota(4) → map<toF32>
+            b = iota(5) → map<toF32>
+            c = map<add>(b, b)
+            out a
+            out c
+        }
+        "#,
+        @"
+    pipeline p (fused, 2 stages)
+    stage 1 [iota → map<toF32> → map<add>] {
+      over 5
+      %3 = iota(5)
+      b = map<toF32>(%3)
+      c = map<add>(b, b)
+      reads direct: -; indexed: -; uniform: -
+      materialises c: f32
+      ends at control flow
+    }
+    stage 2 [iota → map<toF32>] {
+      over 4
+      %0 = iota(4)
+      a = map<toF32>(%0)
+      reads direct: -; indexed: -; uniform: -
+      materialises a: f32
+      ends at control flow
+    }
+    out a = a
+    out c = c
+    ---
+    a = [0.0, 1.0, 2.0, 3.0]
+    c = [0.0, 2.0, 4.0, 6.0, 8.0]
+    "
+    );
+}
+
+#[test]
+fn rule2_a_gather_moves_into_its_consumer() {
+    check!(
+        r#"
+        param n = 5
+        pipeline p {
+            src = iota(10) → map<toF32>
+            idx = iota(n) → map<add>(fill(n, 3))
+            g = gather(idx, src)
+            out r = map<mul>(g, g)
+        }
+        "#,
+        @"
+    pipeline p (fused, 2 stages)
+    param n: int = 5
+    let n: int = 5
+    stage 1 [iota → map<toF32>] {
+      over 10
+      %1 = iota(10)
+      src = map<toF32>(%1)
+      reads direct: -; indexed: -; uniform: -
+      materialises src: f32
+      ends at length change
+    }
+    stage 2 [iota → fill → map<add> → gather → map<mul>] {
+      over n
+      %4 = iota(n)
+      %5 = fill(n, 3)
+      idx = map<add>(%4, %5)
+      g = gather(idx, src)
+      r = map<mul>(g, g)
+      reads direct: -; indexed: src: f32; uniform: n
+      materialises r: f32
+      ends at control flow
+    }
+    out r = r
+    ---
+    r = [9.0, 16.0, 25.0, 36.0, 49.0]
+    "
+    );
+}
+
+#[test]
+fn rule2_a_gather_from_a_value_of_the_same_stage_starts_a_new_one() {
+    check!(
+        r#"
+        param n = 5
+        pipeline p {
+            a = iota(n) → map<toF32>
+            reversed = map<sub>(fill(n, n - 1), iota(n))
+            out r = gather(reversed, a) → map<add>(a)
+        }
+        "#,
+        @"
+    pipeline p (fused, 2 stages)
+    param n: int = 5
+    let n: int = 5
+    stage 1 [iota → map<toF32> → fill → map<sub>] {
+      over n
+      %1 = iota(n)
+      a = map<toF32>(%1)
+      %4 = fill(n, n - 1)
+      reversed = map<sub>(%4, %1)
+      reads direct: -; indexed: -; uniform: n
+      materialises a: f32, reversed: u32
+      ends at indexed read of a value made here
+    }
+    stage 2 [gather → map<add>] {
+      over n
+      %8 = gather(reversed, a)
+      r = map<add>(%8, a)
+      reads direct: reversed: u32, a: f32; indexed: a: f32; uniform: -
+      materialises r: f32
+      ends at control flow
+    }
+    out r = r
+    ---
+    r = [4.0, 4.0, 4.0, 4.0, 4.0]
+    "
+    );
+}
+
+#[test]
+fn rule3_maps_run_inside_scatter_reduce_and_scan() {
+    check!(
+        r#"
+        param n = 8
+        pipeline p {
+            x = iota(n)
+            out total = map<mul>(x, x) → reduce<add>
+            out prefix = map<add>(x, fill(n, 1)) → scan<add>
+            out reversed = scatter(map<sub>(fill(n, n - 1), x), map<toF32>(x), len: n)
+            out counts = scatter<add>(map<lt>(x, fill(n, 3)) → map<toU32>, fill(n, 1), into: fill(2, 0))
+        }
+        "#,
+        @"
+    pipeline p (fused, 5 stages)
+    param n: int = 8
+    let n: int = 8
+    stage 1 [iota → map<mul> → reduce<add>] {
+      over n
+      x = iota(n)
+      %3 = map<mul>(x, x)
+      %4 = reduce<add>(%3)
+      reads direct: -; indexed: -; uniform: n
+      materialises x: u32, %4: int
+      ends at reduce result read by the host
+    }
+    let total: int = %4
+    out total = total
+    stage 2 [fill → map<add> → scan<add>] {
+      over n
+      %6 = fill(n, 1)
+      %7 = map<add>(x, %6)
+      prefix = scan<add>(%7)
+      reads direct: x: u32; indexed: -; uniform: n
+      materialises %6: u32, prefix: u32
+      ends at scan
+    }
+    out prefix = prefix
+    stage 3 [fill → map<sub> → map<toF32> → scatter] {
+      over n
+      %10 = fill(n, n - 1)
+      %11 = map<sub>(%10, x)
+      %12 = map<toF32>(x)
+      reversed = scatter(%11, %12, len: n)
+      reads direct: x: u32; indexed: -; uniform: n
+      materialises reversed: f32
+      ends at scatter
+    }
+    out reversed = reversed
+    stage 4 [fill] {
+      over 2
+      %19 = fill(2, 0)
+      reads direct: -; indexed: -; uniform: -
+      materialises %19: u32
+      ends at length change
+    }
+    stage 5 [fill → map<lt> → map<toU32> → scatter<add>] {
+      over n
+      %15 = fill(n, 3)
+      %16 = map<lt>(x, %15)
+      %17 = map<toU32>(%16)
+      counts = scatter<add>(%17, %6, into: %19)
+      reads direct: x: u32, %6: u32; indexed: %19: u32; uniform: n
+      materialises counts: u32
+      ends at scatter
+    }
+    out counts = counts
+    ---
+    total = 140
+    prefix = [1, 3, 6, 10, 15, 21, 28, 36]
+    reversed = [7.0, 6.0, 5.0, 4.0, 3.0, 2.0, 1.0, 0.0]
+    counts = [5, 3]
+    "
+    );
+}
+
+#[test]
+fn rule4_scan_and_reduce_end_their_stages() {
+    check!(
+        r#"
+        param n = 6
+        pipeline p {
+            x = iota(n)
+            s = scan<add>(x)
+            y = map<add>(s, x)
+            t = reduce<max>(y)
+            out z = map<add>(y, fill(n, t))
+        }
+        "#,
+        @"
+    pipeline p (fused, 3 stages)
+    param n: int = 6
+    let n: int = 6
+    stage 1 [iota → scan<add>] {
+      over n
+      x = iota(n)
+      s = scan<add>(x)
+      reads direct: -; indexed: -; uniform: n
+      materialises x: u32, s: u32
+      ends at scan
+    }
+    stage 2 [map<add> → reduce<max>] {
+      over n
+      y = map<add>(s, x)
+      %7 = reduce<max>(y)
+      reads direct: s: u32, x: u32; indexed: -; uniform: -
+      materialises y: u32, %7: int
+      ends at reduce result read by the host
+    }
+    let t: int = %7
+    stage 3 [fill → map<add>] {
+      over n
+      %9 = fill(n, t)
+      z = map<add>(y, %9)
+      reads direct: y: u32; indexed: -; uniform: n, t
+      materialises z: u32
+      ends at control flow
+    }
+    out z = z
+    ---
+    z = [20, 22, 25, 29, 34, 40]
+    "
+    );
+}
+
+#[test]
+fn rule4_fan_out_and_group_gather_change_the_length() {
+    // A stage ends before each length change; the op that changes it heads
+    // the next stage, where maps over the new length join it.
+    check!(
+        r#"
+        param n = 4
+        param k = 3
+        pipeline p {
+            x = iota(n) → map<toF32>
+            e = scatter<repeat>(x, fanout: k) → map<add>(fill(n * k, 0.5))
+            g = gather<sum>(e, group: k)
+            out h = map<mul>(g, g)
+        }
+        "#,
+        @"
+    pipeline p (fused, 3 stages)
+    param n: int = 4
+    param k: int = 3
+    let n: int = 4
+    let k: int = 3
+    stage 1 [iota → map<toF32>] {
+      over n
+      %2 = iota(n)
+      x = map<toF32>(%2)
+      reads direct: -; indexed: -; uniform: n
+      materialises x: f32
+      ends at length change
+    }
+    stage 2 [scatter<repeat> → fill → map<add>] {
+      over n * k
+      %5 = scatter<repeat>(x, fanout: k)
+      %6 = fill(n * k, 0.5)
+      e = map<add>(%5, %6)
+      reads direct: -; indexed: x: f32; uniform: k, n
+      materialises e: f32
+      ends at length change
+    }
+    stage 3 [gather<sum> → map<mul>] {
+      over (n * k) / k
+      g = gather<sum>(e, group: k)
+      h = map<mul>(g, g)
+      reads direct: -; indexed: e: f32; uniform: k
+      materialises h: f32
+      ends at control flow
+    }
+    out h = h
+    ---
+    h = [2.25, 20.25, 56.25, 110.25]
+    "
+    );
+}
+
+#[test]
+fn rule4_compaction_changes_the_length() {
+    check!(
+        r#"
+        use "prelude.dpp"
+        param n = 10
+        pipeline p {
+            x = iota(n) → map<toF32>
+            keep = map<lt>(x, fill(n, 4.5))
+            kept = gather(compactIndex(keep), x)
+            out r = map<add>(kept, kept)
+        }
+        "#,
+        @"
+    pipeline p (fused, 4 stages)
+    param n: int = 10
+    let n: int = 10
+    stage 1 [iota → map<toF32> → fill → map<lt> → map<toU32> → exclusiveScan<add>] {
+      over n
+      %1 = iota(n)
+      x = map<toF32>(%1)
+      %4 = fill(n, 4.5)
+      keep = map<lt>(x, %4)
+      %7 = map<toU32>(keep)
+      slot = exclusiveScan<add>(%7)
+      reads direct: -; indexed: -; uniform: n
+      materialises x: f32, keep: bool, %7: u32, slot: u32
+      ends at scan
+    }
+    stage 2 [reduce<add>] {
+      over n
+      %11 = reduce<add>(%7)
+      reads direct: %7: u32; indexed: -; uniform: -
+      materialises %11: int
+      ends at reduce result read by the host
+    }
+    let n#1: int = %11
+    stage 3 [iota → scatter] {
+      over n
+      %13 = iota(len(keep))
+      %14 = scatter(slot, %13, len: n#1, mask: keep)
+      reads direct: slot: u32, keep: bool; indexed: -; uniform: len(keep), n#1
+      materialises %14: u32
+      ends at scatter
+    }
+    stage 4 [gather → map<add>] {
+      over n#1
+      kept = gather(%14, x)
+      r = map<add>(kept, kept)
+      reads direct: %14: u32; indexed: x: f32; uniform: -
+      materialises r: f32
+      ends at control flow
+    }
+    out r = r
+    ---
+    r = [0.0, 2.0, 4.0, 6.0, 8.0]
+    "
+    );
+}
+
+#[test]
+fn rule4_loops_and_branches_are_boundaries() {
+    check!(
+        r#"
+        param on = true
+        pipeline p {
+            x = iota(4) → map<toF32>
+            for i in 0..2 { x = map<add>(x, x) → map<mul>(x) }
+            if on { x = map<add>(x, x) }
+            out y = map<mul>(x, x)
+        }
+        "#,
+        @"
+    pipeline p (fused, 4 stages)
+    param on: bool = true
+    let on: bool = true
+    stage 1 [iota → map<toF32>] {
+      over 4
+      %1 = iota(4)
+      x = map<toF32>(%1)
+      reads direct: -; indexed: -; uniform: -
+      materialises x: f32
+      ends at control flow
+    }
+    for i in 0..2 {
+      stage 2 [map<add> → map<mul>] {
+        over len(x)
+        %5 = map<add>(x, x)
+        x = map<mul>(%5, x)
+        reads direct: x: f32; indexed: -; uniform: -
+        materialises x: f32
+        ends at control flow
+      }
+    }
+    if on {
+      stage 3 [map<add>] {
+        over len(x)
+        x = map<add>(x, x)
+        reads direct: x: f32; indexed: -; uniform: -
+        materialises x: f32
+        ends at control flow
+      }
+    }
+    stage 4 [map<mul>] {
+      over len(x)
+      y = map<mul>(x, x)
+      reads direct: x: f32; indexed: -; uniform: -
+      materialises y: f32
+      ends at control flow
+    }
+    out y = y
+    ---
+    y = [0.0, 256.0, 65536.0, 1679616.0]
+    "
+    );
+}
+
+#[test]
+fn no_fuse_gives_one_op_per_stage() {
+    let source = trim_indent(
+        r#"
+        param n = 6
+        pipeline p {
+            a = iota(n) → map<toF32>
+            b = map<add>(a, a)
+            out total = reduce<add>(b)
+        }
+        "#,
+    );
+    let library = library();
+    let plan = compile(&source, false, &library);
+    insta::assert_snapshot!(plan_to_text(&plan, &library), @"
+    pipeline p (unfused, 4 stages)
+    param n: int = 6
+    let n: int = 6
+    stage 1 [iota] {
+      over n
+      %1 = iota(n)
+      reads direct: -; indexed: -; uniform: n
+      materialises %1: u32
+      ends at unfused
+    }
+    stage 2 [map<toF32>] {
+      over n
+      a = map<toF32>(%1)
+      reads direct: %1: u32; indexed: -; uniform: -
+      materialises a: f32
+      ends at unfused
+    }
+    stage 3 [map<add>] {
+      over n
+      b = map<add>(a, a)
+      reads direct: a: f32; indexed: -; uniform: -
+      materialises b: f32
+      ends at unfused
+    }
+    stage 4 [reduce<add>] {
+      over n
+      %6 = reduce<add>(b)
+      reads direct: b: f32; indexed: -; uniform: -
+      materialises %6: float
+      ends at unfused
+    }
+    let total: float = %6
+    out total = total
+    ");
+}
+
+#[test]
+fn a_slot_written_from_another_length_does_not_join_the_stage() {
+    // `x = map<add>(z, z)` runs over `len(z)` = 4, not over the old `len(x)` = 8.
+    check!(
+        r#"
+        pipeline p {
+            x = iota(8)
+            z = iota(4)
+            for i in 0..1 {
+                y = map<toF32>(x)
+                x = map<add>(z, z)
+                out y
+            }
+            out x
+        }
+        "#,
+        @"
+    pipeline p (fused, 4 stages)
+    stage 1 [iota] {
+      over 4
+      z = iota(4)
+      reads direct: -; indexed: -; uniform: -
+      materialises z: u32
+      ends at control flow
+    }
+    stage 2 [iota] {
+      over 8
+      x = iota(8)
+      reads direct: -; indexed: -; uniform: -
+      materialises x: u32
+      ends at control flow
+    }
+    for i in 0..1 {
+      stage 3 [map<toF32>] {
+        over len(x)
+        y = map<toF32>(x)
+        reads direct: x: u32; indexed: -; uniform: -
+        materialises y: f32
+        ends at length change
+      }
+      stage 4 [map<add>] {
+        over 4
+        x = map<add>(z, z)
+        reads direct: z: u32; indexed: -; uniform: -
+        materialises x: u32
+        ends at control flow
+      }
+      out y = y
+    }
+    out x = x
+    ---
+    y = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]
+    x = [0, 2, 4, 6]
+    "
+    );
+}
+
+#[test]
+fn a_length_recorded_before_its_slot_was_rewritten_is_not_reused() {
+    // `a` has the length `x` had before the gather: `b` runs over 8 elements,
+    // `c` over the new `len(x)` = 4.
+    check!(
+        r#"
+        pipeline p {
+            x = iota(8)
+            for i in 0..1 {
+                a = map<toF32>(x)
+                x = gather(iota(4), x)
+                b = map<add>(a, a)
+                c = iota(len(x))
+                out b
+                out c
+            }
+        }
+        "#,
+        @"
+    pipeline p (fused, 5 stages)
+    stage 1 [iota] {
+      over 8
+      x = iota(8)
+      reads direct: -; indexed: -; uniform: -
+      materialises x: u32
+      ends at control flow
+    }
+    for i in 0..1 {
+      stage 2 [map<toF32>] {
+        over len(x)
+        a = map<toF32>(x)
+        reads direct: x: u32; indexed: -; uniform: -
+        materialises a: f32
+        ends at length change
+      }
+      stage 3 [map<add>] {
+        over len(a)
+        b = map<add>(a, a)
+        reads direct: a: f32; indexed: -; uniform: -
+        materialises b: f32
+        ends at length change
+      }
+      stage 4 [iota → gather] {
+        over 4
+        %5 = iota(4)
+        x = gather(%5, x)
+        reads direct: -; indexed: x: u32; uniform: -
+        materialises x: u32
+        ends at length change
+      }
+      stage 5 [iota] {
+        over len(x)
+        c = iota(len(x))
+        reads direct: -; indexed: -; uniform: len(x)
+        materialises c: u32
+        ends at control flow
+      }
+      out b = b
+      out c = c
+    }
+    ---
+    b = [0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0]
+    c = [0, 1, 2, 3]
+    "
+    );
+}
+
+#[test]
+fn a_length_that_reads_a_rebound_host_value_is_not_reused() {
+    // `a` has `m` = 4 elements; `m` is 5 by the time `c = iota(m)` runs.
+    check!(
+        r#"
+        pipeline p {
+            m = 4
+            for i in 0..1 {
+                a = iota(m)
+                m = m + 1
+                b = map<toF32>(a)
+                c = iota(m)
+                out b
+                out c
+            }
+        }
+        "#,
+        @"
+    pipeline p (fused, 3 stages)
+    let m: int = 4
+    for i in 0..1 {
+      stage 1 [iota] {
+        over m
+        a = iota(m)
+        reads direct: -; indexed: -; uniform: m
+        materialises a: u32
+        ends at control flow
+      }
+      let m: int = m + 1
+      stage 2 [iota] {
+        over m
+        c = iota(m)
+        reads direct: -; indexed: -; uniform: m
+        materialises c: u32
+        ends at control flow
+      }
+      stage 3 [map<toF32>] {
+        over len(a)
+        b = map<toF32>(a)
+        reads direct: a: u32; indexed: -; uniform: -
+        materialises b: f32
+        ends at control flow
+      }
+      out b = b
+      out c = c
+    }
+    ---
+    b = [0.0, 1.0, 2.0, 3.0]
+    c = [0, 1, 2, 3, 4]
+    "
+    );
+}
+
+/// Rule 3, `map → scatter`: the maps that make a combining scatter's indices
+/// should run inside the scatter's stage. Here (the histogram pattern) the
+/// `into:` array is made between them, over another length, and that ends the
+/// maps' stage first: the indices are materialised and the scatter runs alone.
+#[test]
+fn rule3_a_scatter_fuses_with_its_maps_past_the_into_array() {
+    let source = trim_indent(
+        r#"
+        param n = 8
+        pipeline p {
+            x = iota(n)
+            bin = map<lt>(x, fill(n, 3)) → map<toU32>
+            out counts = scatter<add>(bin, fill(n, 1), into: fill(2, 0))
+        }
+        "#,
+    );
+    let library = library();
+    let plan = compile(&source, true, &library);
+    let text = plan_to_text(&plan, &library);
+    assert!(
+        plan.stages().iter().any(|s| {
+            let labels: Vec<String> = s.ops.iter().map(|op| op.label()).collect();
+            labels.contains(&"map<toU32>".to_string())
+                && labels.contains(&"scatter<add>".to_string())
+        }),
+        "{text}"
+    );
+}
