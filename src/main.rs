@@ -1,1 +1,371 @@
-fn main() {}
+//! `dpp`: run, inspect and check `.dpp` pipelines.
+//!
+//! Exit status (spec §4): 0 on success, 2 on input errors (a malformed
+//! pipeline, bad arguments, an unreadable scene), 1 on run-time failures.
+
+mod outputs;
+mod scene_setup;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use dpp_runtime::compile::plan_text::plan_to_text;
+use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext, StageTiming};
+use dpp_runtime::{compile_file, CompileOptions, FunctorLibrary, Plan};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(
+    name = "dpp",
+    version,
+    about = "A ray tracer for scientific visualisation built from data-parallel primitives"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Compile a pipeline and run it on a scene (the built-in one without SCENE).
+    Run(RunArgs),
+    /// Print the compiled plan of a pipeline.
+    Plan(PlanArgs),
+    /// Check pipelines for errors without running them.
+    Check {
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+    },
+    /// List every functor with its signature, and the uniforms.
+    Functors,
+}
+
+#[derive(clap::Args)]
+struct CompileArgs {
+    /// Turn map fusion off (one stage per primitive).
+    #[arg(long)]
+    no_fuse: bool,
+    /// Override a param: `--set maxDepth=1` (repeatable).
+    #[arg(long = "set", value_name = "NAME=VALUE", value_parser = parse_assignment)]
+    set: Vec<(String, String)>,
+}
+
+impl CompileArgs {
+    fn options(&self) -> CompileOptions {
+        CompileOptions {
+            fuse: !self.no_fuse,
+            overrides: self.set.clone(),
+        }
+    }
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    pipeline: PathBuf,
+    /// An OBJ file; without it, the built-in procedural isosurface.
+    scene: Option<PathBuf>,
+    /// Where the `image` output goes (PNG). Default: `<pipeline name>.png`.
+    #[arg(short, long, value_name = "FILE.png")]
+    output: Option<PathBuf>,
+    /// Write any output: `--out depth=depth.npy` (.npy for any array, .png for colours).
+    #[arg(long = "out", value_name = "NAME=FILE", value_parser = parse_assignment)]
+    outs: Vec<(String, String)>,
+    /// Image size.
+    #[arg(long, default_value = "1024x768", value_parser = parse_size)]
+    size: (u32, u32),
+    /// A standard view of the scene's bounds (spec §7).
+    #[arg(long, default_value = "front")]
+    view: String,
+    /// Camera position (overrides the view's).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    eye: Option<[f32; 3]>,
+    #[arg(long = "look-at", value_parser = parse_vec3, allow_hyphen_values = true)]
+    look_at: Option<[f32; 3]>,
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    up: Option<[f32; 3]>,
+    /// Vertical field of view in degrees.
+    #[arg(long, default_value_t = 45.0)]
+    fov: f32,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    backend: Backend,
+    /// Print the time spent in each stage.
+    #[arg(long, short = 'v', visible_alias = "verbose")]
+    profile: bool,
+    #[command(flatten)]
+    compile: CompileArgs,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Backend {
+    /// rayon on every core.
+    Cpu,
+}
+
+#[derive(clap::Args)]
+struct PlanArgs {
+    pipeline: PathBuf,
+    #[arg(long, value_enum, default_value_t = PlanFormat::Text)]
+    format: PlanFormat,
+    #[command(flatten)]
+    compile: CompileArgs,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum PlanFormat {
+    Text,
+    Json,
+}
+
+/// What went wrong, and so which exit status.
+enum Failure {
+    /// Bad input: status 2.
+    Input(String),
+    /// The run failed: status 1.
+    Run(String),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let library = dpp_tracer::functor_library();
+    let result = match cli.command {
+        Command::Run(args) => run(args, &library),
+        Command::Plan(args) => plan(args, &library),
+        Command::Check { files } => check(&files, &library),
+        Command::Functors => {
+            print!("{}", functor_listing(&library));
+            Ok(())
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(Failure::Input(message)) => {
+            eprintln!("{message}");
+            ExitCode::from(2)
+        }
+        Err(Failure::Run(message)) => {
+            eprintln!("error: {message}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn compile(
+    path: &std::path::Path,
+    library: &FunctorLibrary,
+    options: &CompileOptions,
+) -> Result<Plan, Failure> {
+    let color = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    compile_file(path, library, options).map_err(|failure| {
+        let count = failure.diagnostics.len();
+        Failure::Input(format!(
+            "{}error: {} could not be compiled ({count} error{})",
+            failure.render(color),
+            path.display(),
+            if count == 1 { "" } else { "s" }
+        ))
+    })
+}
+
+fn plan(args: PlanArgs, library: &FunctorLibrary) -> Result<(), Failure> {
+    let plan = compile(&args.pipeline, library, &args.compile.options())?;
+    match args.format {
+        PlanFormat::Text => print!("{}", plan_to_text(&plan, library)),
+        PlanFormat::Json => println!(
+            "{}",
+            serde_json::to_string_pretty(&plan).map_err(|e| Failure::Run(e.to_string()))?
+        ),
+    }
+    Ok(())
+}
+
+fn check(files: &[PathBuf], library: &FunctorLibrary) -> Result<(), Failure> {
+    let mut failures = Vec::new();
+    for file in files {
+        match compile(file, library, &CompileOptions::default()) {
+            Ok(_) => println!("{}: ok", file.display()),
+            Err(Failure::Input(message) | Failure::Run(message)) => failures.push(message),
+        }
+    }
+    if failures.is_empty() {
+        Ok(())
+    } else {
+        Err(Failure::Input(failures.join("\n")))
+    }
+}
+
+fn functor_listing(library: &FunctorLibrary) -> String {
+    let mut text = String::from("functors:\n");
+    for functor in library.iter() {
+        let signature = functor.signature();
+        text.push_str(&format!(
+            "  {}\n      {}\n",
+            signature.display(&library.records),
+            signature.doc
+        ));
+    }
+    text.push_str("\nrecords:\n");
+    for (_, record) in library.records.iter() {
+        let fields: Vec<String> = record
+            .fields
+            .iter()
+            .map(|(name, ty)| format!("{name}: {}", ty.name(&library.records)))
+            .collect();
+        text.push_str(&format!(
+            "  {} {{ {} }}  {}\n",
+            record.name,
+            fields.join(", "),
+            record.doc
+        ));
+    }
+    text.push_str("\nuniforms:\n");
+    for (record, fields) in &library.uniforms.records {
+        for (field, ty) in fields {
+            text.push_str(&format!("  {record}.{field}: {ty}\n"));
+        }
+    }
+    text
+}
+
+fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
+    let Backend::Cpu = args.backend;
+    let plan = compile(&args.pipeline, library, &args.compile.options())?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.unwrap_or(0))
+        .build()
+        .map_err(|e| {
+            Failure::Input(format!(
+                "error: cannot start {} threads: {e}",
+                args.threads.unwrap_or(0)
+            ))
+        })?;
+
+    let setup_start = Instant::now();
+    let setup = scene_setup::SceneSetup::new(&scene_setup::SceneRequest {
+        scene: args.scene.clone(),
+        size: args.size,
+        view: args.view.clone(),
+        eye: args.eye,
+        look_at: args.look_at,
+        up: args.up,
+        fov: args.fov,
+    })
+    .map_err(Failure::Input)?;
+    let setup_time = setup_start.elapsed();
+
+    let context = RunContext {
+        library,
+        uniforms: &setup.uniforms,
+        resources: &setup.resources,
+        chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
+    };
+    let run_start = Instant::now();
+    let result = pool
+        .install(|| run_plan(&plan, &context))
+        .map_err(|e| Failure::Run(e.to_string()))?;
+    let run_time = run_start.elapsed();
+
+    let mut requests = args.outs.clone();
+    let has_image = plan.outputs.iter().any(|o| o == "image");
+    match (&args.output, has_image) {
+        (Some(path), _) => requests.push(("image".into(), path.display().to_string())),
+        (None, true) if !requests.iter().any(|(n, _)| n == "image") => {
+            requests.push(("image".into(), format!("{}.png", plan.pipeline)))
+        }
+        _ => {}
+    }
+    for (name, value) in &result.outputs {
+        if let OutputValue::Host(value) = value {
+            println!("{name} = {value}");
+        }
+    }
+    for (name, path) in &requests {
+        let Some((_, value)) = result.outputs.iter().find(|(n, _)| n == name) else {
+            let names: Vec<&str> = result.outputs.iter().map(|(n, _)| n.as_str()).collect();
+            return Err(Failure::Input(format!(
+                "error: the pipeline has no output `{name}`; its outputs: {}",
+                names.join(", ")
+            )));
+        };
+        outputs::write_output(
+            name,
+            value,
+            std::path::Path::new(path),
+            &setup.camera,
+            library,
+        )
+        .map_err(Failure::Run)?;
+        println!("wrote {name} to {path}");
+    }
+    if args.profile {
+        eprint!(
+            "{}",
+            profile_report(&result.profile, setup_time, run_time, &setup.description)
+        );
+    }
+    Ok(())
+}
+
+fn profile_report(
+    profile: &[StageTiming],
+    setup: std::time::Duration,
+    run: std::time::Duration,
+    scene: &str,
+) -> String {
+    let mut text = format!(
+        "scene: {scene}\nscene set-up (load, BVH build, camera): {:.1} ms\n",
+        setup.as_secs_f64() * 1e3
+    );
+    text.push_str("stage  runs  elements      time ms   share  ops\n");
+    let total = run.as_secs_f64().max(1e-9);
+    for timing in profile {
+        let ms = timing.time.as_secs_f64() * 1e3;
+        text.push_str(&format!(
+            "{:>5}  {:>4}  {:>10}  {:>9.2}  {:>5.1}%  {}\n",
+            timing.stage,
+            timing.runs,
+            timing.elements,
+            ms,
+            100.0 * timing.time.as_secs_f64() / total,
+            timing.label
+        ));
+    }
+    text.push_str(&format!("whole run: {:.2} ms\n", run.as_secs_f64() * 1e3));
+    text
+}
+
+fn parse_assignment(text: &str) -> Result<(String, String), String> {
+    match text.split_once('=') {
+        Some((name, value)) if !name.trim().is_empty() => {
+            Ok((name.trim().to_string(), value.trim().to_string()))
+        }
+        _ => Err(format!("`{text}` is not NAME=VALUE")),
+    }
+}
+
+fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("`{text}` is not WIDTHxHEIGHT (like 1920x1080)");
+    let (w, h) = text.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h) = (
+        w.trim().parse::<u32>().map_err(|_| bad())?,
+        h.trim().parse::<u32>().map_err(|_| bad())?,
+    );
+    if w == 0 || h == 0 {
+        return Err(format!("image size {w}x{h} is empty"));
+    }
+    Ok((w, h))
+}
+
+fn parse_vec3(text: &str) -> Result<[f32; 3], String> {
+    let parts: Vec<f32> = text
+        .split(',')
+        .map(|p| p.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("`{text}` is not X,Y,Z"))?;
+    match parts.as_slice() {
+        [x, y, z] if parts.iter().all(|v| v.is_finite()) => Ok([*x, *y, *z]),
+        _ => Err(format!("`{text}` is not three finite numbers X,Y,Z")),
+    }
+}

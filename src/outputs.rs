@@ -1,0 +1,137 @@
+//! Writing pipeline outputs: colour arrays of one element per pixel become
+//! PNGs, any array can become a `.npy` (spec §3, `out`).
+
+use dpp_runtime::cpu::exec::OutputValue;
+use dpp_runtime::{Column, FunctorLibrary};
+use dpp_tracer::camera::Camera;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::Path;
+
+pub fn write_output(
+    name: &str,
+    value: &OutputValue,
+    path: &Path,
+    camera: &Camera,
+    library: &FunctorLibrary,
+) -> Result<(), String> {
+    let OutputValue::Array(column) = value else {
+        return Err(format!(
+            "output `{name}` is a host scalar; it is printed, not written to a file"
+        ));
+    };
+    let extension = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    match extension.as_str() {
+        "png" => write_png(name, column, path, camera, library),
+        "npy" => write_npy(name, column, path, library),
+        _ => Err(format!(
+            "cannot write `{}`: use a .png or .npy file name",
+            path.display()
+        )),
+    }
+}
+
+fn write_png(
+    name: &str,
+    column: &Column,
+    path: &Path,
+    camera: &Camera,
+    library: &FunctorLibrary,
+) -> Result<(), String> {
+    let (width, height) = (camera.width, camera.height);
+    let pixels = width as usize * height as usize;
+    if column.len() != pixels {
+        return Err(format!(
+            "output `{name}` has {} elements, but a {width}x{height} image has {pixels} pixels; write it as .npy",
+            column.len()
+        ));
+    }
+    let to_byte = |x: f32| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+    let result = match column {
+        Column::Vec3(colours) => {
+            let bytes: Vec<u8> = colours
+                .iter()
+                .flat_map(|c| c.to_array().map(to_byte))
+                .collect();
+            image::RgbImage::from_raw(width, height, bytes).map(|i| i.save(path))
+        }
+        Column::Vec4(colours) => {
+            let bytes: Vec<u8> = colours
+                .iter()
+                .flat_map(|c| c.to_array().map(to_byte))
+                .collect();
+            image::RgbaImage::from_raw(width, height, bytes).map(|i| i.save(path))
+        }
+        Column::F32(values) => {
+            // A scalar image (depth): finite values scaled to grey, near is bright.
+            let finite = values.iter().copied().filter(|v| v.is_finite());
+            let (low, high) = finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), v| {
+                (l.min(v), h.max(v))
+            });
+            let span = (high - low).max(f32::MIN_POSITIVE);
+            let bytes: Vec<u8> = values
+                .iter()
+                .map(|v| {
+                    if v.is_finite() {
+                        to_byte(1.0 - 0.8 * (v - low) / span)
+                    } else {
+                        0
+                    }
+                })
+                .collect();
+            image::GrayImage::from_raw(width, height, bytes).map(|i| i.save(path))
+        }
+        other => {
+            return Err(format!(
+            "output `{name}` is an array of {}; a PNG needs vec3, vec4 or f32 (write it as .npy)",
+            other.elem_type().name(&library.records)
+        ))
+        }
+    };
+    match result {
+        Some(Ok(())) => Ok(()),
+        Some(Err(e)) => Err(format!("cannot write {}: {e}", path.display())),
+        None => Err("image buffer of the wrong size".into()),
+    }
+}
+
+fn write_npy(
+    name: &str,
+    column: &Column,
+    path: &Path,
+    library: &FunctorLibrary,
+) -> Result<(), String> {
+    use npyz::WriterBuilder;
+    let io = |e: std::io::Error| format!("cannot write {}: {e}", path.display());
+    let file = BufWriter::new(File::create(path).map_err(io)?);
+    let len = column.len() as u64;
+    macro_rules! write_rows {
+        ($values:expr, $shape:expr) => {{
+            let mut writer = npyz::WriteOptions::new()
+                .default_dtype()
+                .shape($shape)
+                .writer(file)
+                .begin_nd()
+                .map_err(io)?;
+            writer.extend($values).map_err(io)?;
+            writer.finish().map_err(io)
+        }};
+    }
+    match column {
+        Column::Bool(v) => write_rows!(v.iter().map(|b| *b as u8), &[len]),
+        Column::U32(v) => write_rows!(v.iter().copied(), &[len]),
+        Column::I32(v) => write_rows!(v.iter().copied(), &[len]),
+        Column::F32(v) => write_rows!(v.iter().copied(), &[len]),
+        Column::Vec2(v) => write_rows!(v.iter().flat_map(|c| c.to_array()), &[len, 2]),
+        Column::Vec3(v) => write_rows!(v.iter().flat_map(|c| c.to_array()), &[len, 3]),
+        Column::Vec4(v) => write_rows!(v.iter().flat_map(|c| c.to_array()), &[len, 4]),
+        Column::Record { ty, .. } => Err(format!(
+            "output `{name}` is an array of records ({}); write one field, like `out t = {name}.t`",
+            library.records.get(*ty).name
+        )),
+    }
+}
