@@ -86,6 +86,18 @@ struct RunArgs {
     /// Vertical field of view in degrees.
     #[arg(long, default_value_t = 45.0)]
     fov: f32,
+    /// A point light `X,Y,Z[,INTENSITY]` (repeatable; replaces the default lights).
+    #[arg(long = "light", value_name = "X,Y,Z[,I]", allow_hyphen_values = true)]
+    lights: Vec<String>,
+    /// Colour map over the scalar: viridis, inferno, magma, plasma, cividis, turbo, cool-to-warm, grey.
+    #[arg(long)]
+    colormap: Option<String>,
+    /// The scalar values at the two ends of the colour map: `A,B`.
+    #[arg(long = "scalar-range", value_name = "A,B", allow_hyphen_values = true)]
+    scalar_range: Option<String>,
+    /// Lights, colour map and materials from a TOML file (default: SCENE.toml beside an OBJ).
+    #[arg(long = "scene-file", value_name = "FILE.toml")]
+    scene_file: Option<PathBuf>,
     /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
@@ -242,6 +254,7 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             ))
         })?;
 
+    let shading = shading_overrides(&args).map_err(Failure::Input)?;
     let setup_start = Instant::now();
     let setup = scene_setup::SceneSetup::new(&scene_setup::SceneRequest {
         scene: args.scene.clone(),
@@ -251,6 +264,8 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         look_at: args.look_at,
         up: args.up,
         fov: args.fov,
+        scene_file: args.scene_file.clone(),
+        shading,
     })
     .map_err(Failure::Input)?;
     let setup_time = setup_start.elapsed();
@@ -306,6 +321,27 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         );
     }
     Ok(())
+}
+
+fn shading_overrides(args: &RunArgs) -> Result<dpp_tracer::ShadingOverrides, String> {
+    let lights = args
+        .lights
+        .iter()
+        .map(|spec| spec.parse::<dpp_tracer::PointLight>())
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| format!("error: {e}"))?;
+    let scalar_range = args
+        .scalar_range
+        .as_deref()
+        .map(dpp_tracer::shading::parse_scalar_range)
+        .transpose()
+        .map_err(|e| format!("error: {e}"))?;
+    Ok(dpp_tracer::ShadingOverrides {
+        lights: (!lights.is_empty()).then_some(lights),
+        colormap: args.colormap.clone(),
+        scalar_range,
+        background: None,
+    })
 }
 
 fn profile_report(

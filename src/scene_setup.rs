@@ -3,9 +3,11 @@
 
 use dpp_runtime::Uniforms;
 use dpp_tracer::builtin_scene::DEFAULT_RESOLUTION;
-use dpp_tracer::{Camera, CameraSetup, StandardView, TraceResources, TraceScene};
+use dpp_tracer::{
+    Camera, CameraSetup, SceneFile, ShadingOverrides, StandardView, TraceResources, TraceScene,
+};
 use glam::Vec3;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 pub struct SceneRequest {
@@ -16,6 +18,9 @@ pub struct SceneRequest {
     pub look_at: Option<[f32; 3]>,
     pub up: Option<[f32; 3]>,
     pub fov: f32,
+    /// A scene file (TOML); without one, `SCENE.toml` beside an OBJ if it exists.
+    pub scene_file: Option<PathBuf>,
+    pub shading: ShadingOverrides,
 }
 
 pub struct SceneSetup {
@@ -51,8 +56,20 @@ impl SceneSetup {
             None => format!("error: the built-in scene failed: {e}"),
         })?;
         let camera = camera(request, &scene).map_err(|e| format!("error: bad camera: {e}"))?;
-        let setup = CameraSetup::new(camera.clone());
-        let uniforms = dpp_tracer::uniforms(&scene, &setup);
+        let mut resources =
+            TraceResources::new(Arc::new(scene), Arc::new(CameraSetup::new(camera.clone())));
+        let shading = Arc::make_mut(&mut resources.shading);
+        if let Some(path) = scene_file(request) {
+            let file = SceneFile::load(&path).map_err(|e| format!("error: {e}"))?;
+            shading
+                .apply(&file)
+                .map_err(|e| format!("error: {}: {e}", path.display()))?;
+        }
+        shading
+            .apply_overrides(&request.shading)
+            .map_err(|e| format!("error: {e}"))?;
+        let uniforms = resources.uniforms();
+        let scene = &resources.scene;
         let description = format!(
             "{} ({} triangles), {}x{}",
             request
@@ -67,14 +84,20 @@ impl SceneSetup {
         );
         Ok(SceneSetup {
             uniforms,
-            resources: TraceResources {
-                scene: Arc::new(scene),
-                camera: Arc::new(setup),
-            },
+            resources,
             camera,
             description,
         })
     }
+}
+
+/// The scene file given, or `mesh.toml` beside `mesh.obj` when there is one.
+fn scene_file(request: &SceneRequest) -> Option<PathBuf> {
+    if request.scene_file.is_some() {
+        return request.scene_file.clone();
+    }
+    let beside = request.scene.as_deref()?.with_extension("toml");
+    Path::exists(&beside).then_some(beside)
 }
 
 /// A standard view of the scene's bounds, with any of eye, look-at and up replaced.

@@ -9,17 +9,19 @@ pub mod mesh;
 pub mod obj;
 mod random;
 pub mod scene;
+pub mod shading;
 
 pub use camera::{Camera, CameraSetup, StandardView};
 pub use functors::{TracerRecords, MISS_PRIM};
 pub use mesh::TriangleMesh;
 pub use scene::{SceneError, TraceResources, TraceScene};
+pub use shading::{PointLight, SceneFile, Shading, ShadingError, ShadingOverrides};
 
 use dpp_runtime::{FunctorLibrary, HostType, HostValue, Uniforms};
 use std::sync::Arc;
 
 /// The uniform fields the tracer fills, by record: `(record, field, type)`.
-pub const UNIFORM_FIELDS: [(&str, &str, HostType); 12] = [
+pub const UNIFORM_FIELDS: [(&str, &str, HostType); 13] = [
     ("camera", "width", HostType::Int),
     ("camera", "height", HostType::Int),
     ("camera", "pixels", HostType::Int),
@@ -32,25 +34,35 @@ pub const UNIFORM_FIELDS: [(&str, &str, HostType); 12] = [
     ("scene", "boundsMax", HostType::Vec3),
     ("scene", "center", HostType::Vec3),
     ("scene", "diagonal", HostType::Float),
+    ("scene", "lights", HostType::Int),
 ];
 
-/// Registers the `Ray` and `Hit` records, declares the `camera.*` and `scene.*`
-/// uniforms, and registers `cameraRay`, `intersect`, `occluded` and `normalColor`.
+/// Registers the `Ray`, `Hit` and `Surface` records, declares the `camera.*` and
+/// `scene.*` uniforms, and registers the ray-tracing functors.
 pub fn register_tracer_functors(library: &mut FunctorLibrary) -> TracerRecords {
+    use functors::*;
     let records = functors::register_records(&mut library.records);
     for (record, field, ty) in UNIFORM_FIELDS {
         library.uniforms.declare(record, field, ty);
     }
-    library.register(Arc::new(functors::camera_ray::CameraRay::new(records.ray)));
-    library.register(Arc::new(functors::intersect::Intersect::new(
-        records.ray,
-        records.hit,
-    )));
-    library.register(Arc::new(functors::occluded::Occluded::new(records.ray)));
-    library.register(Arc::new(functors::normal_color::NormalColor::new(
-        records.ray,
-        records.hit,
-    )));
+    let TracerRecords { ray, hit, surface } = records;
+    let functors: Vec<Arc<dyn dpp_runtime::Functor>> = vec![
+        Arc::new(camera_ray::CameraRay::new(ray)),
+        Arc::new(intersect::Intersect::new(ray, hit)),
+        Arc::new(occluded::Occluded::new(ray)),
+        Arc::new(normal_color::NormalColor::new(ray, hit)),
+        Arc::new(surface::SurfaceFunctor::new(ray, hit, surface)),
+        Arc::new(shadow_ray::ShadowRay::new(surface, ray)),
+        Arc::new(occ_ray_gen::OccRayGen::new(surface, ray)),
+        Arc::new(visible_lights::VisibleLights::new()),
+        Arc::new(shader::Shader::new(surface)),
+        Arc::new(reflect::Reflect::new(surface, ray)),
+        Arc::new(alive::Alive::new(ray)),
+        Arc::new(anti_alias::AntiAlias::new()),
+    ];
+    for functor in functors {
+        library.register(functor);
+    }
     records
 }
 
@@ -62,8 +74,9 @@ pub fn functor_library() -> FunctorLibrary {
     library
 }
 
-/// The uniform values of a scene seen through a camera (every field of [`UNIFORM_FIELDS`]).
-pub fn uniforms(scene: &TraceScene, camera: &CameraSetup) -> Uniforms {
+/// The uniform values of a scene seen through a camera and lit by `shading`
+/// (every field of [`UNIFORM_FIELDS`]; `scene.lights` is the number of lights).
+pub fn uniforms(scene: &TraceScene, camera: &CameraSetup, shading: &Shading) -> Uniforms {
     let mut uniforms = Uniforms::default();
     let view = &camera.camera;
     let vec3 = |v: glam::Vec3| HostValue::Vec3(v.to_array());
@@ -84,6 +97,8 @@ pub fn uniforms(scene: &TraceScene, camera: &CameraSetup) -> Uniforms {
         "diagonal",
         HostValue::Float(scene.bounds.diagonal().into()),
     );
+    let lights = shading.lights().len() as i64;
+    uniforms.set("scene", "lights", HostValue::Int(lights));
     uniforms
 }
 
@@ -98,7 +113,8 @@ mod tests {
         register_tracer_functors(&mut library);
         let scene = TraceScene::builtin(builtin_scene::MIN_RESOLUTION).unwrap();
         let camera = Camera::standard(StandardView::Front, &scene.bounds, 32, 16).unwrap();
-        let values = uniforms(&scene, &CameraSetup::new(camera));
+        let shading = Shading::for_scene(&scene);
+        let values = uniforms(&scene, &CameraSetup::new(camera), &shading);
         let mut filled = 0;
         for (record, fields) in &library.uniforms.records {
             for (field, ty) in fields {
@@ -117,6 +133,7 @@ mod tests {
             values.get("scene", "triangles"),
             Some(HostValue::Int(scene.mesh.triangles.len() as i64))
         );
+        assert_eq!(values.get("scene", "lights"), Some(HostValue::Int(2)));
         let center = values.get("scene", "center").unwrap().as_vec3().unwrap();
         assert_eq!(center, scene.bounds.center());
         assert_eq!(
@@ -128,7 +145,21 @@ mod tests {
     #[test]
     fn the_full_library_has_generic_and_tracer_functors() {
         let library = functor_library();
-        for name in ["add", "cameraRay", "intersect", "occluded", "normalColor"] {
+        for name in [
+            "add",
+            "cameraRay",
+            "intersect",
+            "occluded",
+            "normalColor",
+            "surface",
+            "shadowRay",
+            "occRayGen",
+            "visibleLights",
+            "shader",
+            "reflect",
+            "alive",
+            "antiAlias",
+        ] {
             assert!(library.get(name).is_some(), "{name}");
         }
     }
@@ -138,21 +169,83 @@ mod tests {
         let mut library = FunctorLibrary::default();
         let records = register_tracer_functors(&mut library);
         let names: Vec<_> = library.names().collect();
-        assert_eq!(names, ["cameraRay", "intersect", "normalColor", "occluded"]);
-        let ray = library.records.get(records.ray);
-        let fields: Vec<_> = ray.fields.iter().map(|(name, _)| name.as_str()).collect();
-        assert_eq!(fields, ["origin", "dir", "tmax", "sample"]);
-        let hit = library.records.get(records.hit);
-        let fields: Vec<_> = hit.fields.iter().map(|(name, _)| name.as_str()).collect();
-        assert_eq!(fields, ["t", "prim", "u", "v"]);
-        let signature = library
-            .get("cameraRay")
-            .unwrap()
-            .signature()
-            .display(&library.records);
-        assert!(
-            signature.contains("cameraRay(index: u32) -> (ray: Ray) [spp: int = 1]"),
-            "{signature}"
+        assert_eq!(
+            names,
+            [
+                "alive",
+                "antiAlias",
+                "cameraRay",
+                "intersect",
+                "normalColor",
+                "occRayGen",
+                "occluded",
+                "reflect",
+                "shader",
+                "shadowRay",
+                "surface",
+                "visibleLights"
+            ]
         );
+        let fields = |id| -> Vec<String> {
+            let record = library.records.get(id);
+            record
+                .fields
+                .iter()
+                .map(|(name, ty)| format!("{name}: {}", ty.name(&library.records)))
+                .collect()
+        };
+        assert_eq!(
+            fields(records.ray),
+            [
+                "origin: vec3",
+                "dir: vec3",
+                "tmax: f32",
+                "sample: u32",
+                "weight: vec3",
+                "depth: u32"
+            ]
+        );
+        assert_eq!(
+            fields(records.hit),
+            ["t: f32", "prim: u32", "u: f32", "v: f32"]
+        );
+        assert_eq!(
+            fields(records.surface),
+            [
+                "position: vec3",
+                "normal: vec3",
+                "view: vec3",
+                "scalar: f32",
+                "material: u32",
+                "hit: bool",
+                "sample: u32",
+                "weight: vec3",
+                "depth: u32"
+            ]
+        );
+        let signature = |name| {
+            library
+                .get(name)
+                .unwrap()
+                .signature()
+                .display(&library.records)
+        };
+        let expected = [
+            "map          cameraRay(index: u32) -> (ray: Ray) [spp: int = 1]",
+            "map          surface(ray: Ray, hit: Hit) -> (surf: Surface)",
+            "expand       shadowRay(surf: Surface) -> (ray: Ray)",
+            "expand       occRayGen(surf: Surface) -> (ray: Ray) [range: float = 0.05]",
+            "group        visibleLights(blocked: bool) -> (mask: u32)",
+            "map          shader(surf: Surface, occlusion: f32, visible: u32) -> (rgb: vec3) [ambient: float = 0.15] [falloff: float = 1.0]",
+            "map          reflect(surf: Surface) -> (ray: Ray) [maxDepth: int = 3]",
+            "map          alive(ray: Ray) -> (alive: bool)",
+            "group        antiAlias(color: vec3) -> (pixel: vec3)",
+            "map          normalColor(ray: Ray, hit: Hit) -> (color: vec3)",
+        ];
+        for line in expected {
+            let name = line.split_whitespace().nth(1).unwrap();
+            let name = &name[..name.find('(').unwrap()];
+            assert_eq!(signature(name), line);
+        }
     }
 }

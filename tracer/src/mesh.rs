@@ -149,6 +149,25 @@ impl TriangleMesh {
         let [v0, v1, v2] = self.triangle_vertices(index);
         (v1 - v0).cross(v2 - v0)
     }
+
+    /// Smooth, area-weighted vertex normals: each vertex gets the normalised sum
+    /// of the face normals `(v1 - v0) × (v2 - v0)` (whose length is twice the
+    /// area) of the triangles that use it. A vertex that no triangle (or only
+    /// degenerate ones) uses, or whose faces cancel out, gets zero; the shading
+    /// then falls back to the face normal. Indices must be valid.
+    pub fn smooth_normals(&self) -> Vec<Vec3> {
+        let mut normals = vec![Vec3::ZERO; self.positions.len()];
+        for (index, triangle) in self.triangles.iter().enumerate() {
+            let normal = self.face_normal(index);
+            for &vertex in triangle {
+                normals[vertex as usize] += normal;
+            }
+        }
+        for normal in &mut normals {
+            *normal = normal.normalize_or_zero();
+        }
+        normals
+    }
 }
 
 #[cfg(test)]
@@ -174,6 +193,31 @@ mod tests {
         assert_eq!(bounds.center(), Vec3::new(0.5, 0.5, 0.0));
         assert!((bounds.diagonal() - 2f32.sqrt()).abs() < 1e-6);
         assert_eq!(mesh.face_normal(0), Vec3::Z);
+    }
+
+    #[test]
+    fn smooth_normals_are_area_weighted() {
+        // A big triangle in z = 0 and a small one in x = 0 sharing the edge 0-1.
+        let mesh = TriangleMesh {
+            positions: vec![
+                Vec3::ZERO,
+                Vec3::Y,
+                Vec3::new(4.0, 0.0, 0.0),
+                Vec3::new(0.0, 0.0, 1.0),
+                Vec3::splat(9.0),
+            ],
+            triangles: vec![[0, 2, 1], [0, 1, 3]],
+            normals: None,
+            scalars: None,
+        };
+        let normals = mesh.smooth_normals();
+        // Faces: +z with area 2 (weight 4), +x with area 0.5 (weight 1).
+        let shared = Vec3::new(1.0, 0.0, 4.0).normalize();
+        assert!((normals[0] - shared).length() < 1e-6);
+        assert!((normals[1] - shared).length() < 1e-6);
+        assert_eq!(normals[2], Vec3::Z);
+        assert_eq!(normals[3], Vec3::X);
+        assert_eq!(normals[4], Vec3::ZERO);
     }
 
     #[test]

@@ -4,7 +4,9 @@ use crate::builtin_scene::{builtin_scene, ResolutionOutOfRange};
 use crate::bvh::Bvh;
 use crate::camera::CameraSetup;
 use crate::mesh::{Bounds, MeshError, TriangleMesh};
-use crate::obj::{load_obj, ObjError};
+use crate::obj::{load_obj_with_materials, ObjError};
+use crate::shading::{MeshMaterials, Shading};
+use glam::Vec3;
 use std::path::Path;
 use std::sync::Arc;
 use thiserror::Error;
@@ -17,32 +19,74 @@ pub enum SceneError {
     Builtin(#[from] ResolutionOutOfRange),
     #[error("invalid mesh: {0}")]
     Mesh(#[from] MeshError),
+    #[error("invalid materials: {0}")]
+    Materials(String),
 }
 
-/// A validated mesh with its BVH.
+/// A validated mesh with its BVH and material table.
 #[derive(Clone, Debug)]
 pub struct TraceScene {
+    /// The mesh, with `normals` and `scalars` always present: when the input has
+    /// none, smooth area-weighted vertex normals ([`TriangleMesh::smooth_normals`])
+    /// and the vertices' y coordinates.
     pub mesh: TriangleMesh,
     pub bvh: Bvh,
     pub bounds: Bounds,
+    /// The material table (entry 0 the default) and each triangle's material.
+    pub materials: MeshMaterials,
 }
 
 impl TraceScene {
-    /// Validates the mesh and builds its BVH.
+    /// Validates the mesh, fills in missing shading attributes and builds its BVH;
+    /// every triangle gets the default material.
     pub fn new(mesh: TriangleMesh) -> Result<TraceScene, SceneError> {
+        TraceScene::with_materials(mesh, MeshMaterials::default())
+    }
+
+    /// As [`TraceScene::new`], with a material table (checked against the mesh).
+    pub fn with_materials(
+        mut mesh: TriangleMesh,
+        materials: MeshMaterials,
+    ) -> Result<TraceScene, SceneError> {
         let bvh = Bvh::build(&mesh)?;
         // `build` validated the mesh, so it has triangles and therefore bounds.
         let bounds = mesh.bounds().ok_or(MeshError::NoTriangles)?;
-        Ok(TraceScene { mesh, bvh, bounds })
+        materials
+            .validate(mesh.triangles.len())
+            .map_err(SceneError::Materials)?;
+        if mesh.normals.is_none() {
+            mesh.normals = Some(mesh.smooth_normals());
+        }
+        if mesh.scalars.is_none() {
+            mesh.scalars = Some(mesh.positions.iter().map(|p: &Vec3| p.y).collect());
+        }
+        Ok(TraceScene {
+            mesh,
+            bvh,
+            bounds,
+            materials,
+        })
     }
 
+    /// An OBJ file with its MTL materials (see [`load_obj_with_materials`]).
     pub fn from_obj(path: &Path) -> Result<TraceScene, SceneError> {
-        TraceScene::new(load_obj(path)?)
+        let (mesh, materials) = load_obj_with_materials(path)?;
+        TraceScene::with_materials(mesh, materials)
     }
 
     /// The built-in mixing-layer scene (see [`crate::builtin_scene`]).
     pub fn builtin(resolution: u32) -> Result<TraceScene, SceneError> {
         TraceScene::new(builtin_scene(resolution)?)
+    }
+
+    /// The material id of triangle `prim` (0 for an unknown triangle).
+    #[inline]
+    pub fn triangle_material(&self, prim: u32) -> u32 {
+        self.materials
+            .triangle_materials
+            .get(prim as usize)
+            .copied()
+            .unwrap_or(0)
     }
 }
 
@@ -51,4 +95,23 @@ impl TraceScene {
 pub struct TraceResources {
     pub scene: Arc<TraceScene>,
     pub camera: Arc<CameraSetup>,
+    /// Materials, lights, colour map: [`Shading::for_scene`] unless the user changed them.
+    pub shading: Arc<Shading>,
+}
+
+impl TraceResources {
+    /// The scene and camera with the scene's default shading.
+    pub fn new(scene: Arc<TraceScene>, camera: Arc<CameraSetup>) -> TraceResources {
+        let shading = Arc::new(Shading::for_scene(&scene));
+        TraceResources {
+            scene,
+            camera,
+            shading,
+        }
+    }
+
+    /// The uniforms of this scene, camera and shading (see [`crate::uniforms`]).
+    pub fn uniforms(&self) -> dpp_runtime::Uniforms {
+        crate::uniforms(&self.scene, &self.camera, &self.shading)
+    }
 }

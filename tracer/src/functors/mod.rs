@@ -2,19 +2,34 @@
 //! that each can grow a GPU twin beside its CPU implementation.
 //!
 //! Record layouts (field order is the column order of a record array):
-//! - `Ray { origin: vec3, dir: vec3, tmax: f32, sample: u32 }`, `sample` being
-//!   `row-major pixel * spp + sample in pixel`;
+//! - `Ray { origin: vec3, dir: vec3, tmax: f32, sample: u32, weight: vec3, depth: u32 }`:
+//!   `sample` is `row-major pixel * spp + sample in pixel`; `weight` the colour
+//!   throughput (1 for camera rays, scaled by reflectivity at each mirror
+//!   bounce); `depth` the bounce number (0 for camera rays). A ray is *dead*
+//!   when `tmax <= 0`: it hits nothing and its weight is 0;
 //! - `Hit { t: f32, prim: u32, u: f32, v: f32 }`, a miss being
-//!   `t = +inf, prim = 4294967295, u = v = 0`.
+//!   `t = +inf, prim = 4294967295, u = v = 0`;
+//! - `Surface { position: vec3, normal: vec3, view: vec3, scalar: f32, material: u32,
+//!   hit: bool, sample: u32, weight: vec3, depth: u32 }`: what shading needs of a
+//!   hit (see [`surface`]); a miss has `hit = false` and zeros except `sample`,
+//!   `weight` and `depth`.
 
+pub mod alive;
+pub mod anti_alias;
 pub mod camera_ray;
 pub mod intersect;
 pub mod normal_color;
+pub mod occ_ray_gen;
 pub mod occluded;
+pub mod reflect;
+pub mod shader;
+pub mod shadow_ray;
+pub mod surface;
+pub mod visible_lights;
 
 use crate::bvh::{HitRecord, Ray};
 use dpp_runtime::{
-    Column, ColumnView, ElemType, FunctorError, RecordId, RecordRegistry, RecordType,
+    CallContext, Column, ColumnView, ElemType, FunctorError, RecordId, RecordRegistry, RecordType,
 };
 use glam::Vec3;
 use std::sync::Arc;
@@ -22,11 +37,16 @@ use std::sync::Arc;
 /// `Hit.prim` of a miss.
 pub const MISS_PRIM: u32 = u32::MAX;
 
+/// Secondary rays start this fraction of the scene diagonal off the surface,
+/// along the shading normal, so that they do not hit their own triangle.
+pub const SURFACE_EPSILON: f32 = 1e-4;
+
 /// The ids of the tracer's record types in a library's registry.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TracerRecords {
     pub ray: RecordId,
     pub hit: RecordId,
+    pub surface: RecordId,
 }
 
 pub(crate) fn register_records(records: &mut RecordRegistry) -> TracerRecords {
@@ -37,8 +57,10 @@ pub(crate) fn register_records(records: &mut RecordRegistry) -> TracerRecords {
             ("dir".into(), ElemType::Vec3),
             ("tmax".into(), ElemType::F32),
             ("sample".into(), ElemType::U32),
+            ("weight".into(), ElemType::Vec3),
+            ("depth".into(), ElemType::U32),
         ],
-        doc: "a ray segment (hits count for 0 < t < tmax); sample = pixel * spp + sample in pixel, pixel row-major".into(),
+        doc: "a ray segment (hits count for 0 < t < tmax; dead when tmax <= 0); sample = pixel * spp + sample in pixel, pixel row-major; weight = colour throughput; depth = bounce number".into(),
     });
     let hit = records.register(RecordType {
         name: "Hit".into(),
@@ -50,7 +72,47 @@ pub(crate) fn register_records(records: &mut RecordRegistry) -> TracerRecords {
         ],
         doc: "closest hit: distance, triangle in input file order, barycentrics of v1 and v2; a miss has t = inf, prim = 4294967295".into(),
     });
-    TracerRecords { ray, hit }
+    let surface = records.register(RecordType {
+        name: "Surface".into(),
+        fields: vec![
+            ("position".into(), ElemType::Vec3),
+            ("normal".into(), ElemType::Vec3),
+            ("view".into(), ElemType::Vec3),
+            ("scalar".into(), ElemType::F32),
+            ("material".into(), ElemType::U32),
+            ("hit".into(), ElemType::Bool),
+            ("sample".into(), ElemType::U32),
+            ("weight".into(), ElemType::Vec3),
+            ("depth".into(), ElemType::U32),
+        ],
+        doc: "a shading point: position, unit shading normal facing the ray, unit vector towards the ray origin, interpolated scalar, material id; hit = false for a miss; sample, weight and depth of its ray".into(),
+    });
+    TracerRecords { ray, hit, surface }
+}
+
+/// One `Ray` record.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct RayRecord {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub tmax: f32,
+    pub sample: u32,
+    pub weight: Vec3,
+    pub depth: u32,
+}
+
+impl RayRecord {
+    /// A dead ray: `tmax = 0`, zero weight, a harmless unit direction.
+    pub fn dead(sample: u32, depth: u32) -> RayRecord {
+        RayRecord {
+            origin: Vec3::ZERO,
+            dir: Vec3::Z,
+            tmax: 0.0,
+            sample,
+            weight: Vec3::ZERO,
+            depth,
+        }
+    }
 }
 
 /// The columns of a chunk of `Ray` records.
@@ -58,6 +120,9 @@ pub(crate) struct RayColumns<'a> {
     pub origin: &'a [Vec3],
     pub dir: &'a [Vec3],
     pub tmax: &'a [f32],
+    pub sample: &'a [u32],
+    pub weight: &'a [Vec3],
+    pub depth: &'a [u32],
 }
 
 impl<'a> RayColumns<'a> {
@@ -66,6 +131,9 @@ impl<'a> RayColumns<'a> {
             origin: view.field(0).as_vec3(),
             dir: view.field(1).as_vec3(),
             tmax: view.field(2).as_f32(),
+            sample: view.field(3).as_u32(),
+            weight: view.field(4).as_vec3(),
+            depth: view.field(5).as_u32(),
         }
     }
 
@@ -73,6 +141,7 @@ impl<'a> RayColumns<'a> {
         self.origin.len()
     }
 
+    /// The ray as the BVH traverses it.
     #[inline]
     pub fn get(&self, index: usize) -> Ray {
         Ray {
@@ -83,16 +152,200 @@ impl<'a> RayColumns<'a> {
     }
 }
 
+/// Appends `Ray` records to an output column.
+pub(crate) struct RayWriter<'a> {
+    origin: &'a mut Vec<Vec3>,
+    dir: &'a mut Vec<Vec3>,
+    tmax: &'a mut Vec<f32>,
+    sample: &'a mut Vec<u32>,
+    weight: &'a mut Vec<Vec3>,
+    depth: &'a mut Vec<u32>,
+}
+
+impl<'a> RayWriter<'a> {
+    pub fn new(column: &'a mut Column, capacity: usize) -> Result<RayWriter<'a>, FunctorError> {
+        let [origin, dir, tmax, sample, weight, depth] = record_fields_mut::<6>(column)?;
+        let writer = RayWriter {
+            origin: origin.as_vec3_mut(),
+            dir: dir.as_vec3_mut(),
+            tmax: tmax.as_f32_mut(),
+            sample: sample.as_u32_mut(),
+            weight: weight.as_vec3_mut(),
+            depth: depth.as_u32_mut(),
+        };
+        writer.origin.reserve(capacity);
+        writer.dir.reserve(capacity);
+        writer.tmax.reserve(capacity);
+        writer.sample.reserve(capacity);
+        writer.weight.reserve(capacity);
+        writer.depth.reserve(capacity);
+        Ok(writer)
+    }
+
+    #[inline]
+    pub fn push(&mut self, ray: RayRecord) {
+        self.origin.push(ray.origin);
+        self.dir.push(ray.dir);
+        self.tmax.push(ray.tmax);
+        self.sample.push(ray.sample);
+        self.weight.push(ray.weight);
+        self.depth.push(ray.depth);
+    }
+}
+
 /// The columns of a chunk of `Hit` records.
 pub(crate) struct HitColumns<'a> {
     pub prim: &'a [u32],
+    pub u: &'a [f32],
+    pub v: &'a [f32],
 }
 
 impl<'a> HitColumns<'a> {
     pub fn new(view: &ColumnView<'a>) -> HitColumns<'a> {
         HitColumns {
             prim: view.field(1).as_u32(),
+            u: view.field(2).as_f32(),
+            v: view.field(3).as_f32(),
         }
+    }
+}
+
+/// One `Surface` record.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct SurfaceRecord {
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub view: Vec3,
+    pub scalar: f32,
+    pub material: u32,
+    pub hit: bool,
+    pub sample: u32,
+    pub weight: Vec3,
+    pub depth: u32,
+}
+
+impl SurfaceRecord {
+    /// What a ray that hits nothing sees.
+    pub fn miss(sample: u32, weight: Vec3, depth: u32) -> SurfaceRecord {
+        SurfaceRecord {
+            position: Vec3::ZERO,
+            normal: Vec3::ZERO,
+            view: Vec3::ZERO,
+            scalar: 0.0,
+            material: 0,
+            hit: false,
+            sample,
+            weight,
+            depth,
+        }
+    }
+
+    /// The start of a secondary ray: off the surface along the normal.
+    #[inline]
+    pub fn offset_origin(&self, epsilon: f32) -> Vec3 {
+        self.position + self.normal * epsilon
+    }
+}
+
+/// The columns of a chunk of `Surface` records.
+pub(crate) struct SurfaceColumns<'a> {
+    pub position: &'a [Vec3],
+    pub normal: &'a [Vec3],
+    pub view: &'a [Vec3],
+    pub scalar: &'a [f32],
+    pub material: &'a [u32],
+    pub hit: &'a [bool],
+    pub sample: &'a [u32],
+    pub weight: &'a [Vec3],
+    pub depth: &'a [u32],
+}
+
+impl<'a> SurfaceColumns<'a> {
+    pub fn new(view: &ColumnView<'a>) -> SurfaceColumns<'a> {
+        SurfaceColumns {
+            position: view.field(0).as_vec3(),
+            normal: view.field(1).as_vec3(),
+            view: view.field(2).as_vec3(),
+            scalar: view.field(3).as_f32(),
+            material: view.field(4).as_u32(),
+            hit: view.field(5).as_bool(),
+            sample: view.field(6).as_u32(),
+            weight: view.field(7).as_vec3(),
+            depth: view.field(8).as_u32(),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.position.len()
+    }
+
+    #[inline]
+    pub fn get(&self, index: usize) -> SurfaceRecord {
+        SurfaceRecord {
+            position: self.position[index],
+            normal: self.normal[index],
+            view: self.view[index],
+            scalar: self.scalar[index],
+            material: self.material[index],
+            hit: self.hit[index],
+            sample: self.sample[index],
+            weight: self.weight[index],
+            depth: self.depth[index],
+        }
+    }
+}
+
+/// Appends `Surface` records to an output column.
+pub(crate) struct SurfaceWriter<'a> {
+    position: &'a mut Vec<Vec3>,
+    normal: &'a mut Vec<Vec3>,
+    view: &'a mut Vec<Vec3>,
+    scalar: &'a mut Vec<f32>,
+    material: &'a mut Vec<u32>,
+    hit: &'a mut Vec<bool>,
+    sample: &'a mut Vec<u32>,
+    weight: &'a mut Vec<Vec3>,
+    depth: &'a mut Vec<u32>,
+}
+
+impl<'a> SurfaceWriter<'a> {
+    pub fn new(column: &'a mut Column, capacity: usize) -> Result<SurfaceWriter<'a>, FunctorError> {
+        let [position, normal, view, scalar, material, hit, sample, weight, depth] =
+            record_fields_mut::<9>(column)?;
+        let writer = SurfaceWriter {
+            position: position.as_vec3_mut(),
+            normal: normal.as_vec3_mut(),
+            view: view.as_vec3_mut(),
+            scalar: scalar.as_f32_mut(),
+            material: material.as_u32_mut(),
+            hit: hit.as_bool_mut(),
+            sample: sample.as_u32_mut(),
+            weight: weight.as_vec3_mut(),
+            depth: depth.as_u32_mut(),
+        };
+        writer.position.reserve(capacity);
+        writer.normal.reserve(capacity);
+        writer.view.reserve(capacity);
+        writer.scalar.reserve(capacity);
+        writer.material.reserve(capacity);
+        writer.hit.reserve(capacity);
+        writer.sample.reserve(capacity);
+        writer.weight.reserve(capacity);
+        writer.depth.reserve(capacity);
+        Ok(writer)
+    }
+
+    #[inline]
+    pub fn push(&mut self, surface: SurfaceRecord) {
+        self.position.push(surface.position);
+        self.normal.push(surface.normal);
+        self.view.push(surface.view);
+        self.scalar.push(surface.scalar);
+        self.material.push(surface.material);
+        self.hit.push(surface.hit);
+        self.sample.push(surface.sample);
+        self.weight.push(surface.weight);
+        self.depth.push(surface.depth);
     }
 }
 
@@ -103,6 +356,34 @@ pub(crate) fn hit_fields(hit: Option<HitRecord>) -> (f32, u32, f32, f32) {
         Some(hit) => (hit.t, hit.prim, hit.u, hit.v),
         None => (f32::INFINITY, MISS_PRIM, 0.0, 0.0),
     }
+}
+
+/// The `scene.diagonal` uniform (positive and finite).
+pub(crate) fn scene_diagonal(ctx: &CallContext<'_>, functor: &str) -> Result<f32, FunctorError> {
+    ctx.uniforms
+        .get("scene", "diagonal")
+        .and_then(|value| value.as_f32())
+        .filter(|diagonal| diagonal.is_finite() && *diagonal > 0.0)
+        .ok_or_else(|| {
+            FunctorError(format!(
+                "{functor}: the scene.diagonal uniform is missing or not a positive number (no scene loaded?)"
+            ))
+        })
+}
+
+/// A named parameter read as a finite `f32`.
+pub(crate) fn named_f32(
+    ctx: &CallContext<'_>,
+    index: usize,
+    functor: &str,
+    name: &str,
+) -> Result<f32, FunctorError> {
+    let value = ctx.named(index);
+    value.as_f32().filter(|v| v.is_finite()).ok_or_else(|| {
+        FunctorError(format!(
+            "{functor}: {name} must be a finite number, got {value}"
+        ))
+    })
 }
 
 /// Mutable access to all `N` field columns of a record output at once (the
@@ -130,45 +411,38 @@ pub(crate) fn record_fields_mut<const N: usize>(
 
 #[cfg(test)]
 pub(crate) mod test_support {
+    use super::{RayRecord, RayWriter, SurfaceRecord, SurfaceWriter};
     use crate::camera::{Camera, CameraSetup};
+    use crate::register_tracer_functors;
     use crate::scene::{TraceResources, TraceScene};
-    use crate::{register_tracer_functors, uniforms};
+    use crate::shading::Shading;
     use dpp_runtime::{
         CallContext, Column, ColumnView, ElemType, FunctorLibrary, HostValue, Uniforms,
     };
     use glam::Vec3;
     use std::sync::Arc;
 
+    /// A live camera-like ray (weight 1, depth 0).
+    pub fn ray(origin: Vec3, dir: Vec3, tmax: f32, sample: u32) -> RayRecord {
+        RayRecord {
+            origin,
+            dir,
+            tmax,
+            sample,
+            weight: Vec3::ONE,
+            depth: 0,
+        }
+    }
+
     /// Rays: down onto the small square, down beside it onto the big one, up into
     /// nothing, and down with tmax short of the big square.
     pub fn probe_rays(fixture: &Fixture) -> Column {
-        let ElemType::Record(ty) = fixture.record("Ray") else {
-            unreachable!("Ray is a record")
-        };
-        Column::Record {
-            ty,
-            fields: vec![
-                Arc::new(Column::Vec3(vec![
-                    Vec3::new(0.25, 0.5, 2.0),
-                    Vec3::new(3.0, 0.0, 2.0),
-                    Vec3::new(0.0, 0.0, 2.0),
-                    Vec3::new(3.0, 0.0, 2.0),
-                ])),
-                Arc::new(Column::Vec3(vec![
-                    Vec3::NEG_Z,
-                    Vec3::NEG_Z,
-                    Vec3::Z,
-                    Vec3::NEG_Z,
-                ])),
-                Arc::new(Column::F32(vec![
-                    f32::INFINITY,
-                    f32::INFINITY,
-                    f32::INFINITY,
-                    2.5,
-                ])),
-                Arc::new(Column::U32(vec![0, 1, 2, 3])),
-            ],
-        }
+        fixture.rays(&[
+            ray(Vec3::new(0.25, 0.5, 2.0), Vec3::NEG_Z, f32::INFINITY, 0),
+            ray(Vec3::new(3.0, 0.0, 2.0), Vec3::NEG_Z, f32::INFINITY, 1),
+            ray(Vec3::new(0.0, 0.0, 2.0), Vec3::Z, f32::INFINITY, 2),
+            ray(Vec3::new(3.0, 0.0, 2.0), Vec3::NEG_Z, 2.5, 3),
+        ])
     }
 
     /// A library, a small scene (two unit squares facing +z at z = 0 and z = -1) and
@@ -181,8 +455,6 @@ pub(crate) mod test_support {
 
     impl Fixture {
         pub fn new() -> Fixture {
-            let mut library = FunctorLibrary::default();
-            register_tracer_functors(&mut library);
             let mesh = crate::mesh::TriangleMesh {
                 positions: vec![
                     Vec3::new(-1.0, -1.0, 0.0),
@@ -198,20 +470,50 @@ pub(crate) mod test_support {
                 normals: None,
                 scalars: None,
             };
-            let scene = Arc::new(TraceScene::new(mesh).unwrap());
+            Fixture::with_scene(TraceScene::new(mesh).unwrap())
+        }
+
+        pub fn with_scene(scene: TraceScene) -> Fixture {
+            let mut library = FunctorLibrary::default();
+            register_tracer_functors(&mut library);
+            let scene = Arc::new(scene);
             let camera =
                 Camera::new(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, Vec3::Y, 90.0, 4, 3).unwrap();
-            let camera = Arc::new(CameraSetup::new(camera));
-            let uniforms = uniforms(&scene, &camera);
+            let resources = TraceResources::new(scene, Arc::new(CameraSetup::new(camera)));
+            let uniforms = resources.uniforms();
             Fixture {
                 library,
-                resources: TraceResources { scene, camera },
+                resources,
                 uniforms,
             }
         }
 
+        /// Changes the shading (and the uniforms that follow from it).
+        pub fn set_shading(&mut self, change: impl FnOnce(&mut Shading)) {
+            change(Arc::make_mut(&mut self.resources.shading));
+            self.uniforms = self.resources.uniforms();
+        }
+
         pub fn record(&self, name: &str) -> ElemType {
             ElemType::Record(self.library.records.find(name).unwrap())
+        }
+
+        fn empty(&self, name: &str) -> Column {
+            Column::with_capacity(self.record(name), 0, &self.library.records)
+        }
+
+        pub fn rays(&self, rays: &[RayRecord]) -> Column {
+            let mut column = self.empty("Ray");
+            let mut writer = RayWriter::new(&mut column, rays.len()).unwrap();
+            rays.iter().for_each(|&ray| writer.push(ray));
+            column
+        }
+
+        pub fn surfaces(&self, surfaces: &[SurfaceRecord]) -> Column {
+            let mut column = self.empty("Surface");
+            let mut writer = SurfaceWriter::new(&mut column, surfaces.len()).unwrap();
+            surfaces.iter().for_each(|&surface| writer.push(surface));
+            column
         }
 
         /// Runs functor `name` on one chunk starting at `first_index`.
@@ -222,13 +524,32 @@ pub(crate) mod test_support {
             first_index: usize,
             inputs: &[ColumnView<'_>],
         ) -> Result<Vec<Column>, dpp_runtime::FunctorError> {
+            self.run_grouped(name, named, 1, first_index, inputs)
+        }
+
+        /// Runs a functor with `k = group` (a `Group` or `Expand` functor).
+        pub fn run_grouped(
+            &self,
+            name: &str,
+            named: &[HostValue],
+            group: usize,
+            first_index: usize,
+            inputs: &[ColumnView<'_>],
+        ) -> Result<Vec<Column>, dpp_runtime::FunctorError> {
             let functor = self.library.get(name).unwrap();
+            // Named parameters left out take their defaults, as the runtime does.
+            let mut values: Vec<HostValue> = named.to_vec();
+            for param in
+                &functor.signature().named[named.len().min(functor.signature().named.len())..]
+            {
+                values.push(param.default.expect("test passes required parameters"));
+            }
             let ctx = CallContext {
-                named,
+                named: &values,
                 uniforms: &self.uniforms,
                 resources: &self.resources,
                 first_index,
-                group: 1,
+                group,
                 records: &self.library.records,
             };
             let mut outputs: Vec<Column> = functor
@@ -247,5 +568,28 @@ pub(crate) mod test_support {
             functor.run_cpu(&ctx, inputs, &mut outputs)?;
             Ok(outputs)
         }
+    }
+
+    /// The rays of a `Ray` column.
+    pub fn read_rays(column: &Column) -> Vec<RayRecord> {
+        let view = column.view();
+        let rays = super::RayColumns::new(&view);
+        (0..rays.len())
+            .map(|i| RayRecord {
+                origin: rays.origin[i],
+                dir: rays.dir[i],
+                tmax: rays.tmax[i],
+                sample: rays.sample[i],
+                weight: rays.weight[i],
+                depth: rays.depth[i],
+            })
+            .collect()
+    }
+
+    /// The surfaces of a `Surface` column.
+    pub fn read_surfaces(column: &Column) -> Vec<SurfaceRecord> {
+        let view = column.view();
+        let surfaces = super::SurfaceColumns::new(&view);
+        (0..surfaces.len()).map(|i| surfaces.get(i)).collect()
     }
 }

@@ -2,14 +2,16 @@
 //! camera. Ray `index` belongs to pixel `morton_pixels[index / spp]` (Morton order
 //! for coherence) and sample `index % spp`; its `sample` field is
 //! `row-major pixel * spp + sample`, so scattering by it writes row-major output.
+//! Camera rays have weight 1 and depth 0.
 
 use crate::camera::{check_samples_per_pixel, sample_offset};
-use crate::functors::record_fields_mut;
+use crate::functors::{RayRecord, RayWriter};
 use crate::scene::TraceResources;
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
 };
+use glam::Vec3;
 
 pub struct CameraRay {
     signature: Signature,
@@ -64,17 +66,7 @@ impl Functor for CameraRay {
         let setup = &ctx.resources::<TraceResources>()?.camera;
         let camera = &setup.camera;
         let indices = inputs[0].as_u32();
-        let [origin, dir, tmax, sample] = record_fields_mut::<4>(&mut outputs[0])?;
-        let (origin, dir, tmax, sample) = (
-            origin.as_vec3_mut(),
-            dir.as_vec3_mut(),
-            tmax.as_f32_mut(),
-            sample.as_u32_mut(),
-        );
-        origin.reserve(indices.len());
-        dir.reserve(indices.len());
-        tmax.reserve(indices.len());
-        sample.reserve(indices.len());
+        let mut rays = RayWriter::new(&mut outputs[0], indices.len())?;
         for &index in indices {
             let pixel = *setup
                 .morton_pixels
@@ -87,11 +79,15 @@ impl Functor for CameraRay {
                 })?;
             let sample_in_pixel = index % spp;
             let (sx, sy) = sample_offset(spp, sample_in_pixel);
-            origin.push(camera.eye);
-            dir.push(camera.direction(pixel % camera.width, pixel / camera.width, sx, sy));
-            tmax.push(f32::INFINITY);
-            // Below 2^30: the camera caps pixels at 2^28 and spp at 4.
-            sample.push(pixel * spp + sample_in_pixel);
+            rays.push(RayRecord {
+                origin: camera.eye,
+                dir: camera.direction(pixel % camera.width, pixel / camera.width, sx, sy),
+                tmax: f32::INFINITY,
+                // Below 2^30: the camera caps pixels at 2^28 and spp at 4.
+                sample: pixel * spp + sample_in_pixel,
+                weight: Vec3::ONE,
+                depth: 0,
+            });
         }
         Ok(())
     }
@@ -119,6 +115,8 @@ mod tests {
             assert_eq!(rays.field(1).as_vec3()[i], expected);
             assert_eq!(rays.field(0).as_vec3()[i], Vec3::new(0.0, 0.0, 2.0));
             assert_eq!(rays.field(2).as_f32()[i], f32::INFINITY);
+            assert_eq!(rays.field(4).as_vec3()[i], Vec3::ONE);
+            assert_eq!(rays.field(5).as_u32()[i], 0);
         }
         // Morton order of a 4x3 image, as row-major indices.
         assert_eq!(samples, &[0, 1, 4, 5, 2, 3, 6, 7, 8, 9, 10, 11]);

@@ -1,5 +1,6 @@
 //! `intersect(ray: Ray) -> (hit: Hit)`: the closest hit of each ray with
-//! `0 < t < ray.tmax`, triangles named in input file order.
+//! `0 < t < ray.tmax`, triangles named in input file order. Dead rays (`tmax <=
+//! 0`) miss without a traversal.
 
 use crate::functors::{hit_fields, record_fields_mut, RayColumns};
 use crate::scene::TraceResources;
@@ -58,8 +59,13 @@ impl Functor for Intersect {
         u.reserve(rays.len());
         v.reserve(rays.len());
         for index in 0..rays.len() {
-            let (hit_t, hit_prim, hit_u, hit_v) =
-                hit_fields(bvh.intersect_closest(&rays.get(index)));
+            let ray = rays.get(index);
+            let hit = if ray.tmax > 0.0 {
+                bvh.intersect_closest(&ray)
+            } else {
+                None
+            };
+            let (hit_t, hit_prim, hit_u, hit_v) = hit_fields(hit);
             t.push(hit_t);
             prim.push(hit_prim);
             u.push(hit_u);
@@ -98,6 +104,22 @@ mod tests {
             + u * Vec3::new(1.0, 1.0, 0.0)
             + v * Vec3::new(-1.0, 1.0, 0.0);
         assert!((point - Vec3::new(0.25, 0.5, 0.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn dead_rays_miss() {
+        let fixture = Fixture::new();
+        let mut rays = crate::functors::test_support::read_rays(&probe_rays(&fixture));
+        for ray in &mut rays {
+            ray.tmax = 0.0;
+        }
+        rays[1].tmax = -1.0;
+        rays[2].tmax = f32::NAN;
+        let rays = fixture.rays(&rays);
+        let out = fixture.run("intersect", &[], 0, &[rays.view()]).unwrap();
+        assert_eq!(out[0].view().field(1).as_u32(), &[MISS_PRIM; 4]);
+        let out = fixture.run("occluded", &[], 0, &[rays.view()]).unwrap();
+        assert_eq!(out[0].view().as_bool(), &[false; 4]);
     }
 
     #[test]

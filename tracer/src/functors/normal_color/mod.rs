@@ -86,8 +86,8 @@ impl Functor for NormalColor {
 #[cfg(test)]
 mod tests {
     use super::BACKGROUND;
-    use crate::functors::test_support::{probe_rays, Fixture};
-    use dpp_runtime::{Column, ElemType};
+    use crate::functors::test_support::{probe_rays, ray, Fixture};
+    use dpp_runtime::Column;
     use glam::Vec3;
     use std::sync::Arc;
 
@@ -106,18 +106,8 @@ mod tests {
         );
 
         // Seen from below, the same triangles face -z.
-        let ElemType::Record(ty) = fixture.record("Ray") else {
-            unreachable!("Ray is a record")
-        };
-        let from_below = Column::Record {
-            ty,
-            fields: vec![
-                Arc::new(Column::Vec3(vec![Vec3::new(0.25, 0.5, -0.5)])),
-                Arc::new(Column::Vec3(vec![Vec3::Z])),
-                Arc::new(Column::F32(vec![f32::INFINITY])),
-                Arc::new(Column::U32(vec![0])),
-            ],
-        };
+        let from_below =
+            fixture.rays(&[ray(Vec3::new(0.25, 0.5, -0.5), Vec3::Z, f32::INFINITY, 0)]);
         let hits = fixture
             .run("intersect", &[], 0, &[from_below.view()])
             .unwrap();

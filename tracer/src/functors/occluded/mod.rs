@@ -1,5 +1,6 @@
 //! `occluded(ray: Ray) -> (blocked: bool)`: whether anything lies at
-//! `0 < t < ray.tmax` (any hit; traversal stops at the first one).
+//! `0 < t < ray.tmax` (any hit; traversal stops at the first one). Dead rays
+//! (`tmax <= 0`) are never blocked.
 
 use crate::functors::RayColumns;
 use crate::scene::TraceResources;
@@ -50,7 +51,7 @@ impl Functor for Occluded {
         blocked.reserve(rays.len());
         for index in 0..rays.len() {
             let ray = rays.get(index);
-            blocked.push(bvh.occluded(&ray, ray.tmax));
+            blocked.push(ray.tmax > 0.0 && bvh.occluded(&ray, ray.tmax));
         }
         Ok(())
     }

@@ -1,0 +1,73 @@
+//! `alive(ray: Ray) -> (alive: bool)`: `tmax > 0` (false for NaN), the mask a
+//! pipeline compacts its rays with.
+
+use crate::functors::RayColumns;
+use dpp_runtime::{
+    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
+    RecordId, Signature, TypePattern,
+};
+
+pub struct Alive {
+    signature: Signature,
+}
+
+impl Alive {
+    pub fn new(ray: RecordId) -> Alive {
+        Alive {
+            signature: Signature {
+                name: "alive",
+                kind: FunctorKind::Map,
+                inputs: vec![ArrayParam {
+                    name: "ray",
+                    ty: TypePattern::Exact(ElemType::Record(ray)),
+                }],
+                outputs: vec![ArrayParam {
+                    name: "alive",
+                    ty: TypePattern::Exact(ElemType::Bool),
+                }],
+                named: vec![],
+                doc: "whether the ray is alive: tmax > 0",
+            },
+        }
+    }
+}
+
+impl Functor for Alive {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        _ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        let rays = RayColumns::new(&inputs[0]);
+        outputs[0]
+            .as_bool_mut()
+            .extend(rays.tmax.iter().map(|&tmax| tmax > 0.0));
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::functors::test_support::{ray, Fixture};
+    use crate::functors::RayRecord;
+    use glam::Vec3;
+
+    #[test]
+    fn positive_tmax_is_alive() {
+        let fixture = Fixture::new();
+        let rays = fixture.rays(&[
+            ray(Vec3::ZERO, Vec3::Z, f32::INFINITY, 0),
+            ray(Vec3::ZERO, Vec3::Z, 1e-6, 1),
+            RayRecord::dead(2, 0),
+            ray(Vec3::ZERO, Vec3::Z, -1.0, 3),
+            ray(Vec3::ZERO, Vec3::Z, f32::NAN, 4),
+        ]);
+        let out = fixture.run("alive", &[], 0, &[rays.view()]).unwrap();
+        assert_eq!(out[0].view().as_bool(), &[true, true, false, false, false]);
+    }
+}

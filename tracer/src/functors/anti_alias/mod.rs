@@ -1,0 +1,121 @@
+//! `antiAlias(color: vec3) -> (pixel: vec3)`, a group functor used as
+//! `gather<antiAlias>(color, group: spp)`: the mean of a pixel's `k` samples
+//! (linear RGB), clamped to [0, 1] and encoded with the sRGB transfer function.
+//!
+//! This is where display encoding happens: the PNG writer writes the values it
+//! gets as they are (scaled to 8 bits), so a pipeline whose colours are linear
+//! (the shader's) ends with `antiAlias`, with `group: 1` when it takes one
+//! sample per pixel. NaN components become 0.
+
+use crate::shading::linear_to_srgb;
+use dpp_runtime::{
+    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
+    Signature, TypePattern,
+};
+use glam::Vec3;
+
+pub struct AntiAlias {
+    signature: Signature,
+}
+
+impl AntiAlias {
+    #[allow(clippy::new_without_default)]
+    pub fn new() -> AntiAlias {
+        AntiAlias {
+            signature: Signature {
+                name: "antiAlias",
+                kind: FunctorKind::Group,
+                inputs: vec![ArrayParam {
+                    name: "color",
+                    ty: TypePattern::Exact(ElemType::Vec3),
+                }],
+                outputs: vec![ArrayParam {
+                    name: "pixel",
+                    ty: TypePattern::Exact(ElemType::Vec3),
+                }],
+                named: vec![],
+                doc: "mean of each group of k linear colours (group: spp, 1 allowed), clamped to [0, 1] and sRGB-encoded for display",
+            },
+        }
+    }
+}
+
+impl Functor for AntiAlias {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        let samples = ctx.group;
+        if samples == 0 {
+            return Err(FunctorError("antiAlias: group must be at least 1".into()));
+        }
+        let colors = inputs[0].as_vec3();
+        let scale = 1.0 / samples as f32;
+        outputs[0]
+            .as_vec3_mut()
+            .extend(colors.chunks_exact(samples).map(|group| {
+                let mean = group.iter().copied().sum::<Vec3>() * scale;
+                // `max` first: it maps NaN to 0.
+                linear_to_srgb(mean.max(Vec3::ZERO).min(Vec3::ONE))
+            }));
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::functors::test_support::Fixture;
+    use dpp_runtime::Column;
+    use glam::Vec3;
+
+    fn close(a: Vec3, b: Vec3) -> bool {
+        (a - b).abs().max_element() < 1e-5
+    }
+
+    #[test]
+    fn mean_of_the_samples_then_srgb() {
+        let fixture = Fixture::new();
+        let colors = Column::Vec3(vec![
+            Vec3::new(0.0, 0.2, 1.0),
+            Vec3::new(0.4, 0.2, 1.0),
+            Vec3::new(0.2, 0.2, 1.0),
+            Vec3::new(0.2, 0.2, 1.0),
+            // Out of range: clamped.
+            Vec3::new(-1.0, 3.0, 0.0),
+            Vec3::new(-1.0, 3.0, 0.0),
+            Vec3::new(-1.0, 3.0, 0.0),
+            Vec3::new(-1.0, 3.0, f32::NAN),
+        ]);
+        let out = fixture
+            .run_grouped("antiAlias", &[], 4, 0, &[colors.view()])
+            .unwrap();
+        let pixels = out[0].view().as_vec3();
+        assert_eq!(pixels.len(), 2);
+        // linear 0.2 is sRGB 0.4845; 1 stays 1.
+        assert!(
+            close(pixels[0], Vec3::new(0.484_529, 0.484_529, 1.0)),
+            "{}",
+            pixels[0]
+        );
+        assert_eq!(pixels[1], Vec3::new(0.0, 1.0, 0.0));
+        // Group 1: the encoding alone; linear 0.5 is sRGB 0.7354, 0.001 is 0.01292.
+        let colors = Column::Vec3(vec![Vec3::new(0.5, 0.001, 0.0)]);
+        let out = fixture
+            .run_grouped("antiAlias", &[], 1, 0, &[colors.view()])
+            .unwrap();
+        assert!(
+            close(
+                out[0].view().as_vec3()[0],
+                Vec3::new(0.735_357, 0.012_92, 0.0)
+            ),
+            "{}",
+            out[0].view().as_vec3()[0]
+        );
+    }
+}

@@ -1,0 +1,183 @@
+//! `reflect(surf: Surface) -> (ray: Ray) [maxDepth: int = 3]`: the mirror
+//! reflection ray of a hit whose material reflects.
+//!
+//! Where the material's reflectivity is above 0 and `surf.depth + 1 < maxDepth`,
+//! the ray starts `SURFACE_EPSILON * scene.diagonal` off the surface along the
+//! normal, in the direction `d - 2 (d·n) n` (`d = -view`), with `tmax = inf`,
+//! `depth = surf.depth + 1` and `weight = surf.weight * reflectivity`: an
+//! untinted mirror, so that with the shader's `1 - reflectivity` the pixel is the
+//! blend `(1 - r) local + r reflected`. Everywhere else the ray is dead (`tmax =
+//! 0`, zero weight), so with `maxDepth` the pipeline traces at most `maxDepth`
+//! segments per camera ray (the camera ray included).
+
+use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
+use crate::scene::TraceResources;
+use dpp_runtime::{
+    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
+    HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
+};
+
+pub struct Reflect {
+    signature: Signature,
+}
+
+impl Reflect {
+    pub fn new(surface: RecordId, ray: RecordId) -> Reflect {
+        Reflect {
+            signature: Signature {
+                name: "reflect",
+                kind: FunctorKind::Map,
+                inputs: vec![ArrayParam {
+                    name: "surf",
+                    ty: TypePattern::Exact(ElemType::Record(surface)),
+                }],
+                outputs: vec![ArrayParam {
+                    name: "ray",
+                    ty: TypePattern::Exact(ElemType::Record(ray)),
+                }],
+                named: vec![NamedParam {
+                    name: "maxDepth",
+                    ty: HostType::Int,
+                    default: Some(HostValue::Int(3)),
+                    doc: "ray segments per camera ray: a reflection of depth >= maxDepth is dead",
+                }],
+                doc: "mirror reflection of a reflective hit (weight * reflectivity, depth + 1); dead otherwise or at maxDepth",
+            },
+        }
+    }
+}
+
+impl Functor for Reflect {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        let max_depth = ctx.named(0).as_int().unwrap_or(0);
+        let materials = ctx.resources::<TraceResources>()?.shading.materials();
+        let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "reflect")?;
+        let surfaces = SurfaceColumns::new(&inputs[0]);
+        let mut out = RayWriter::new(&mut outputs[0], surfaces.len())?;
+        for index in 0..surfaces.len() {
+            let surface = surfaces.get(index);
+            let depth = surface.depth.saturating_add(1);
+            if !surface.hit || i64::from(depth) >= max_depth {
+                out.push(RayRecord::dead(surface.sample, depth));
+                continue;
+            }
+            let material = materials.get(surface.material as usize).ok_or_else(|| {
+                FunctorError(format!(
+                    "reflect: surface has material {}, but the scene has {} materials",
+                    surface.material,
+                    materials.len()
+                ))
+            })?;
+            if material.reflectivity <= 0.0 {
+                out.push(RayRecord::dead(surface.sample, depth));
+                continue;
+            }
+            let incoming = -surface.view;
+            let dir = incoming - 2.0 * incoming.dot(surface.normal) * surface.normal;
+            out.push(RayRecord {
+                origin: surface.offset_origin(epsilon),
+                dir: dir.normalize_or_zero(),
+                tmax: f32::INFINITY,
+                sample: surface.sample,
+                weight: surface.weight * material.reflectivity,
+                depth,
+            });
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::functors::test_support::{read_rays, Fixture};
+    use crate::functors::{RayRecord, SurfaceRecord, SURFACE_EPSILON};
+    use crate::shading::MaterialSpec;
+    use dpp_runtime::HostValue;
+    use glam::Vec3;
+
+    fn mirror_fixture() -> Fixture {
+        let mut fixture = Fixture::new();
+        fixture.set_shading(|shading| {
+            let spec = MaterialSpec {
+                reflectivity: Some(0.5),
+                ..Default::default()
+            };
+            shading.set_material("default", &spec).unwrap();
+        });
+        fixture
+    }
+
+    fn surface(view: Vec3, depth: u32) -> SurfaceRecord {
+        SurfaceRecord {
+            position: Vec3::new(0.5, 0.5, 0.0),
+            normal: Vec3::Z,
+            view,
+            scalar: 0.0,
+            material: 0,
+            hit: true,
+            sample: 9,
+            weight: Vec3::new(1.0, 0.5, 0.25),
+            depth,
+        }
+    }
+
+    #[test]
+    fn mirror_direction_weight_and_depth() {
+        let fixture = mirror_fixture();
+        let diagonal = fixture.resources.scene.bounds.diagonal();
+        let view = Vec3::new(-1.0, 0.0, 1.0).normalize();
+        let surfaces = fixture.surfaces(&[surface(view, 0), surface(Vec3::Z, 1)]);
+        let out = fixture.run("reflect", &[], 0, &[surfaces.view()]).unwrap();
+        let rays = read_rays(&out[0]);
+        // Coming in along (1, 0, -1), leaving along (1, 0, 1).
+        assert!((rays[0].dir - Vec3::new(1.0, 0.0, 1.0).normalize()).length() < 1e-6);
+        assert_eq!(
+            rays[0].origin,
+            Vec3::new(0.5, 0.5, SURFACE_EPSILON * diagonal)
+        );
+        assert_eq!(rays[0].tmax, f32::INFINITY);
+        assert_eq!(rays[0].weight, Vec3::new(0.5, 0.25, 0.125));
+        assert_eq!((rays[0].sample, rays[0].depth), (9, 1));
+        assert!((rays[1].dir - Vec3::Z).length() < 1e-6);
+        assert_eq!(rays[1].depth, 2);
+    }
+
+    #[test]
+    fn dead_at_max_depth_for_misses_and_dull_materials() {
+        let fixture = mirror_fixture();
+        let surfaces = fixture.surfaces(&[
+            surface(Vec3::Z, 1),
+            surface(Vec3::Z, 2),
+            SurfaceRecord::miss(4, Vec3::ONE, 0),
+        ]);
+        let out = fixture
+            .run("reflect", &[HostValue::Int(3)], 0, &[surfaces.view()])
+            .unwrap();
+        let rays = read_rays(&out[0]);
+        assert!(rays[0].tmax > 0.0 && rays[0].depth == 2);
+        assert_eq!(rays[1], RayRecord::dead(9, 3));
+        assert_eq!(rays[2], RayRecord::dead(4, 1));
+        // maxDepth 1: no reflections at all.
+        let out = fixture
+            .run("reflect", &[HostValue::Int(1)], 0, &[surfaces.view()])
+            .unwrap();
+        assert!(read_rays(&out[0]).iter().all(|r| r.tmax == 0.0));
+        // The default material does not reflect.
+        let dull = Fixture::new();
+        let out = dull.run("reflect", &[], 0, &[surfaces.view()]).unwrap();
+        assert_eq!(read_rays(&out[0])[0], RayRecord::dead(9, 2));
+        // And `alive` tells them apart.
+        let out = fixture.run("reflect", &[], 0, &[surfaces.view()]).unwrap();
+        let alive = fixture.run("alive", &[], 0, &[out[0].view()]).unwrap();
+        assert_eq!(alive[0].view().as_bool(), &[true, false, false]);
+    }
+}

@@ -1,0 +1,173 @@
+//! `shadowRay(surf: Surface) -> (ray: Ray)`, an expand functor used as
+//! `scatter<shadowRay>(surf, fanout: scene.lights)`: lane `j` is the ray from the
+//! surface point towards light `j`.
+//!
+//! The ray starts `SURFACE_EPSILON * scene.diagonal` off the surface along the
+//! normal, has a unit direction and `tmax` = the distance to the light minus
+//! that epsilon, so the light itself never blocks it. It keeps the surface's
+//! `sample`, `weight` and `depth`. A non-hit surface, or a light on the far side
+//! of the surface (`n·l <= 0`, which the shader does not light anyway), gives a
+//! dead ray (`tmax = 0`), which `occluded` reports as not blocked.
+
+use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
+use crate::scene::TraceResources;
+use dpp_runtime::{
+    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
+    RecordId, Signature, TypePattern,
+};
+
+pub struct ShadowRay {
+    signature: Signature,
+}
+
+impl ShadowRay {
+    pub fn new(surface: RecordId, ray: RecordId) -> ShadowRay {
+        ShadowRay {
+            signature: Signature {
+                name: "shadowRay",
+                kind: FunctorKind::Expand,
+                inputs: vec![ArrayParam {
+                    name: "surf",
+                    ty: TypePattern::Exact(ElemType::Record(surface)),
+                }],
+                outputs: vec![ArrayParam {
+                    name: "ray",
+                    ty: TypePattern::Exact(ElemType::Record(ray)),
+                }],
+                named: vec![],
+                doc: "lane j: the ray from the surface point to light j (fanout: scene.lights); dead for a miss or a light behind the surface",
+            },
+        }
+    }
+}
+
+impl Functor for ShadowRay {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        let lights = ctx.resources::<TraceResources>()?.shading.lights();
+        let lanes = ctx.group;
+        if lanes != lights.len() {
+            return Err(FunctorError(format!(
+                "shadowRay: fanout {lanes}, but the scene has {} lights; use fanout: scene.lights",
+                lights.len()
+            )));
+        }
+        let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "shadowRay")?;
+        let surfaces = SurfaceColumns::new(&inputs[0]);
+        let mut out = RayWriter::new(&mut outputs[0], surfaces.len() * lanes)?;
+        for index in 0..surfaces.len() {
+            let surface = surfaces.get(index);
+            for light in lights {
+                let dead = RayRecord::dead(surface.sample, surface.depth);
+                if !surface.hit {
+                    out.push(dead);
+                    continue;
+                }
+                let origin = surface.offset_origin(epsilon);
+                let to_light = light.position - origin;
+                let distance = to_light.length();
+                let tmax = distance - epsilon;
+                if !(surface.normal.dot(to_light) > 0.0 && tmax > 0.0) {
+                    out.push(dead);
+                    continue;
+                }
+                out.push(RayRecord {
+                    origin,
+                    dir: to_light / distance,
+                    tmax,
+                    sample: surface.sample,
+                    weight: surface.weight,
+                    depth: surface.depth,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::functors::test_support::{read_rays, Fixture};
+    use crate::functors::{RayRecord, SurfaceRecord, SURFACE_EPSILON};
+    use crate::shading::PointLight;
+    use glam::Vec3;
+
+    pub fn surface_at(position: Vec3, normal: Vec3, sample: u32) -> SurfaceRecord {
+        SurfaceRecord {
+            position,
+            normal,
+            view: normal,
+            scalar: 0.0,
+            material: 0,
+            hit: true,
+            sample,
+            weight: Vec3::ONE,
+            depth: 0,
+        }
+    }
+
+    #[test]
+    fn one_ray_per_light_towards_it() {
+        let mut fixture = Fixture::new();
+        let lights = vec![
+            PointLight::new(Vec3::new(0.0, 0.0, 4.0), 1.0),
+            PointLight::new(Vec3::new(6.0, 0.0, 1.0), 1.0),
+            // Below the z = 0 plane: behind a surface facing +z.
+            PointLight::new(Vec3::new(0.0, 0.0, -3.0), 1.0),
+        ];
+        fixture.set_shading(|shading| shading.set_lights(lights).unwrap());
+        let diagonal = fixture.resources.scene.bounds.diagonal();
+        let epsilon = SURFACE_EPSILON * diagonal;
+        let surfaces = fixture.surfaces(&[
+            surface_at(Vec3::ZERO, Vec3::Z, 5),
+            SurfaceRecord::miss(6, Vec3::ONE, 1),
+        ]);
+        let out = fixture
+            .run_grouped("shadowRay", &[], 3, 0, &[surfaces.view()])
+            .unwrap();
+        let rays = read_rays(&out[0]);
+        assert_eq!(rays.len(), 6);
+        let origin = Vec3::new(0.0, 0.0, epsilon);
+        assert_eq!(rays[0].origin, origin);
+        assert_eq!(rays[0].dir, Vec3::Z);
+        assert!((rays[0].tmax - (4.0 - 2.0 * epsilon)).abs() < 1e-6);
+        assert_eq!(
+            (rays[0].sample, rays[0].weight, rays[0].depth),
+            (5, Vec3::ONE, 0)
+        );
+        let to_second = Vec3::new(6.0, 0.0, 1.0) - origin;
+        assert!((rays[1].dir - to_second.normalize()).length() < 1e-6);
+        assert!((rays[1].tmax - (to_second.length() - epsilon)).abs() < 1e-5);
+        assert_eq!(rays[2], RayRecord::dead(5, 0));
+        for lane in 0..3 {
+            assert_eq!(rays[3 + lane], RayRecord::dead(6, 1));
+        }
+        // Traced from the big square under the small one: the small square blocks
+        // the light straight above; the ray to (6, 0, 1) passes z = 0 at x = 3,
+        // beside the small square.
+        let from_big = fixture.surfaces(&[surface_at(Vec3::new(0.0, 0.0, -1.0), Vec3::Z, 0)]);
+        let out = fixture
+            .run_grouped("shadowRay", &[], 3, 0, &[from_big.view()])
+            .unwrap();
+        let blocked = fixture.run("occluded", &[], 0, &[out[0].view()]).unwrap();
+        assert_eq!(blocked[0].view().as_bool(), &[true, false, false]);
+    }
+
+    #[test]
+    fn fanout_must_match_the_lights() {
+        let fixture = Fixture::new();
+        let surfaces = fixture.surfaces(&[surface_at(Vec3::ZERO, Vec3::Z, 0)]);
+        let error = fixture
+            .run_grouped("shadowRay", &[], 3, 0, &[surfaces.view()])
+            .unwrap_err();
+        assert!(error.0.contains("2 lights"), "{error}");
+    }
+}

@@ -1,0 +1,104 @@
+//! `visibleLights(blocked: bool) -> (mask: u32)`, a group functor used as
+//! `gather<visibleLights>(blocked, group: scene.lights)` after
+//! `scatter<shadowRay>(surf, fanout: scene.lights) → map<occluded>`: bit `j` of
+//! the mask is set when light `j` is *not* blocked. At most 32 lights (the scene
+//! set-up refuses more).
+
+use crate::shading::MAX_LIGHTS;
+use dpp_runtime::{
+    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
+    Signature, TypePattern,
+};
+
+pub struct VisibleLights {
+    signature: Signature,
+}
+
+impl VisibleLights {
+    #[allow(clippy::new_without_default)]
+    pub fn new() -> VisibleLights {
+        VisibleLights {
+            signature: Signature {
+                name: "visibleLights",
+                kind: FunctorKind::Group,
+                inputs: vec![ArrayParam {
+                    name: "blocked",
+                    ty: TypePattern::Exact(ElemType::Bool),
+                }],
+                outputs: vec![ArrayParam {
+                    name: "mask",
+                    ty: TypePattern::Exact(ElemType::U32),
+                }],
+                named: vec![],
+                doc: "bit j set when light j of the group is not blocked (group: scene.lights, at most 32)",
+            },
+        }
+    }
+}
+
+impl Functor for VisibleLights {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        let lights = ctx.group;
+        if lights == 0 || lights > MAX_LIGHTS {
+            return Err(FunctorError(format!(
+                "visibleLights: group {lights}; a mask holds 1 to {MAX_LIGHTS} lights"
+            )));
+        }
+        let blocked = inputs[0].as_bool();
+        let masks = outputs[0].as_u32_mut();
+        masks.extend(blocked.chunks_exact(lights).map(|group| {
+            group
+                .iter()
+                .enumerate()
+                .filter(|(_, &blocked)| !blocked)
+                .fold(0u32, |mask, (light, _)| mask | (1 << light))
+        }));
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::functors::test_support::Fixture;
+    use dpp_runtime::Column;
+
+    #[test]
+    fn bit_j_means_light_j_is_visible() {
+        let fixture = Fixture::new();
+        let blocked = Column::Bool(vec![
+            false, true, false, true, true, true, false, false, false,
+        ]);
+        let out = fixture
+            .run_grouped("visibleLights", &[], 3, 0, &[blocked.view()])
+            .unwrap();
+        assert_eq!(out[0].view().as_u32(), &[0b101, 0b000, 0b111]);
+        let out = fixture
+            .run_grouped("visibleLights", &[], 1, 0, &[blocked.view()])
+            .unwrap();
+        assert_eq!(out[0].view().as_u32(), &[1, 0, 1, 0, 0, 0, 1, 1, 1]);
+        let all: Vec<bool> = (0..32).map(|j| j == 31).collect();
+        let out = fixture
+            .run_grouped("visibleLights", &[], 32, 0, &[Column::Bool(all).view()])
+            .unwrap();
+        assert_eq!(out[0].view().as_u32(), &[u32::MAX >> 1]);
+    }
+
+    #[test]
+    fn more_than_32_lights_is_an_error() {
+        let fixture = Fixture::new();
+        let blocked = Column::Bool(vec![false; 33]);
+        let error = fixture
+            .run_grouped("visibleLights", &[], 33, 0, &[blocked.view()])
+            .unwrap_err();
+        assert!(error.0.contains("32"), "{error}");
+    }
+}
