@@ -28,7 +28,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Compile a pipeline and run it on a scene (the built-in one without SCENE).
-    Run(RunArgs),
+    Run(Box<RunArgs>),
     /// Print the compiled plan of a pipeline.
     Plan(PlanArgs),
     /// Check pipelines for errors without running them.
@@ -143,7 +143,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let library = dpp_tracer::functor_library();
     let result = match cli.command {
-        Command::Run(args) => run(args, &library),
+        Command::Run(args) => run(*args, &library),
         Command::Plan(args) => plan(args, &library),
         Command::Check { files } => check(&files, &library),
         Command::Functors => {

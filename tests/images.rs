@@ -1,0 +1,466 @@
+//! Images through the `dpp` command: golden images compared with FLIP
+//! (NVIDIA's perceptual difference for rendered images), and the effect of
+//! each WORKLOAD3 feature measured on a small scene with known geometry.
+//!
+//! `DPP_BLESS=1 cargo test --test images` rewrites the golden images; a missing
+//! golden image is a failure, never a silent pass.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Largest mean FLIP error against a golden image (FLIP is 0 for identical
+/// images, 1 at most). The renderer is deterministic, so this only leaves room
+/// for libm differences between machines; turning the small scene's one
+/// shadow off costs about 0.04.
+const GOLDEN_TOLERANCE: f32 = 0.005;
+
+/// A floor (`floor`), a box standing on it (`box`) and a mirror behind it
+/// (`mirror`, reflectivity 0.8), in that order.
+const SCENE_OBJ: &str = "\
+mtllib scene.mtl
+usemtl floor
+v -2 0 -2
+v -2 0 2
+v 2 0 2
+v 2 0 -2
+f 1 2 3 4
+usemtl box
+v -0.4 0 -0.4
+v 0.4 0 -0.4
+v 0.4 0.8 -0.4
+v -0.4 0.8 -0.4
+v -0.4 0 0.4
+v 0.4 0 0.4
+v 0.4 0.8 0.4
+v -0.4 0.8 0.4
+f 5 8 7 6
+f 9 10 11 12
+f 5 6 10 9
+f 8 12 11 7
+f 5 9 12 8
+f 6 7 11 10
+usemtl mirror
+v -1.5 0 -1.5
+v 1.5 0 -1.5
+v 1.5 1.5 -1.5
+v -1.5 1.5 -1.5
+f 13 14 15 16
+";
+
+const SCENE_MTL: &str = "\
+newmtl floor
+Kd 0.8 0.8 0.8
+Ks 0.1 0.1 0.1
+Ns 16
+newmtl box
+Kd 0.9 0.45 0.3
+Ks 0.5 0.5 0.5
+Ns 64
+newmtl mirror
+Kd 0.2 0.2 0.2
+Ks 0.9 0.9 0.9
+Ns 128
+refl 0.8
+";
+
+/// Camera and lighting of the small scene: seen from the front and above, one
+/// light up and to the left, a light grey colour map (the scalar is the height).
+const SCENE_VIEW: &[&str] = &[
+    "--eye",
+    "0.3,2.2,4",
+    "--look-at",
+    "0,0.4,-0.3",
+    "--light=-2.5,3,1.5,1.5",
+    "--colormap",
+    "grey",
+    "--scalar-range=-8,1",
+];
+
+struct Image {
+    width: u32,
+    height: u32,
+    rgb: Vec<u8>,
+}
+
+impl Image {
+    fn load(path: &Path) -> Image {
+        let image = image::open(path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+            .to_rgb8();
+        Image {
+            width: image.width(),
+            height: image.height(),
+            rgb: image.into_raw(),
+        }
+    }
+
+    /// Linear-light luminance of pixel `i` (the PNG holds sRGB).
+    fn luminance(&self, i: usize) -> f32 {
+        let linear = |c: u8| {
+            let c = c as f32 / 255.0;
+            if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            }
+        };
+        let p = &self.rgb[3 * i..3 * i + 3];
+        0.2126 * linear(p[0]) + 0.7152 * linear(p[1]) + 0.0722 * linear(p[2])
+    }
+
+    fn pixels(&self) -> usize {
+        (self.width * self.height) as usize
+    }
+}
+
+/// A scratch folder holding the small scene.
+fn scene_dir() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("scene.obj"), SCENE_OBJ).unwrap();
+    std::fs::write(dir.path().join("scene.mtl"), SCENE_MTL).unwrap();
+    dir
+}
+
+/// Runs `dpp run PIPELINE [args]` in `dir` and returns the image it wrote.
+fn render(dir: &Path, pipeline: &str, args: &[&str]) -> Image {
+    let pipeline = common::repo().join("pipelines").join(pipeline);
+    let output = Command::new(env!("CARGO_BIN_EXE_dpp"))
+        .arg("run")
+        .arg(&pipeline)
+        .args(args)
+        .args(["-o", "out.png"])
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "dpp run {args:?}: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    Image::load(&dir.join("out.png"))
+}
+
+fn small_scene(dir: &Path, pipeline: &str, size: &str, extra: &[&str]) -> Image {
+    let mut args = vec!["scene.obj", "--size", size];
+    args.extend_from_slice(SCENE_VIEW);
+    args.extend_from_slice(extra);
+    render(dir, pipeline, &args)
+}
+
+fn mean_flip(reference: &Image, test: &Image) -> f32 {
+    assert_eq!(
+        (reference.width, reference.height),
+        (test.width, test.height)
+    );
+    let reference =
+        nv_flip::FlipImageRgb8::with_data(reference.width, reference.height, &reference.rgb);
+    let test = nv_flip::FlipImageRgb8::with_data(test.width, test.height, &test.rgb);
+    let error = nv_flip::flip(reference, test, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
+    nv_flip::FlipPool::from_image(&error).mean()
+}
+
+fn check_golden(name: &str, image: &Image) {
+    let path: PathBuf = common::repo()
+        .join("tests/golden")
+        .join(format!("{name}.png"));
+    if std::env::var_os("DPP_BLESS").is_some() {
+        image::RgbImage::from_raw(image.width, image.height, image.rgb.clone())
+            .unwrap()
+            .save(&path)
+            .unwrap();
+        return;
+    }
+    assert!(
+        path.exists(),
+        "no golden image {}: run with DPP_BLESS=1 to make it, then look at it",
+        path.display()
+    );
+    let error = mean_flip(&Image::load(&path), image);
+    assert!(
+        error <= GOLDEN_TOLERANCE,
+        "{name}: mean FLIP {error} > {GOLDEN_TOLERANCE} against {}",
+        path.display()
+    );
+}
+
+#[test]
+fn golden_images_of_the_builtin_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    for pipeline in ["workload2", "workload3"] {
+        let image = render(
+            dir.path(),
+            &format!("{pipeline}.dpp"),
+            &["--size", "160x90"],
+        );
+        check_golden(&format!("builtin_{pipeline}"), &image);
+    }
+}
+
+#[test]
+fn golden_images_of_a_small_scene_with_materials() {
+    let dir = scene_dir();
+    for pipeline in ["workload2", "workload3"] {
+        let image = small_scene(dir.path(), &format!("{pipeline}.dpp"), "160x120", &[]);
+        check_golden(&format!("boxes_{pipeline}"), &image);
+    }
+}
+
+#[test]
+fn the_golden_comparison_sees_a_missing_shadow() {
+    // The tolerance must not hide a real change: shadows off is far outside it.
+    let dir = scene_dir();
+    let with = small_scene(dir.path(), "workload3.dpp", "160x120", &[]);
+    let without = small_scene(
+        dir.path(),
+        "workload3.dpp",
+        "160x120",
+        &["--set", "shadows=false"],
+    );
+    let error = mean_flip(&with, &without);
+    assert!(error > 5.0 * GOLDEN_TOLERANCE, "mean FLIP {error}");
+}
+
+/// Triangle ids per pixel (WORKLOAD1) for the same camera: which pixel sees what.
+fn prims(dir: &Path, size: &str) -> Vec<u32> {
+    let pipeline = common::repo().join("pipelines/workload1.dpp");
+    let mut args = vec![
+        "run".to_string(),
+        pipeline.display().to_string(),
+        "scene.obj".into(),
+        "--size".into(),
+        size.into(),
+    ];
+    args.extend(SCENE_VIEW.iter().map(|s| s.to_string()));
+    args.extend([
+        "--out".into(),
+        "prim=prim.npy".into(),
+        "-o".into(),
+        "normals.png".into(),
+    ]);
+    let output = Command::new(env!("CARGO_BIN_EXE_dpp"))
+        .args(&args)
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let bytes = std::fs::read(dir.join("prim.npy")).unwrap();
+    npyz::NpyFile::new(&bytes[..]).unwrap().into_vec().unwrap()
+}
+
+const FLOOR: std::ops::Range<u32> = 0..2;
+const BOX: std::ops::Range<u32> = 2..14;
+const MIRROR: std::ops::Range<u32> = 14..16;
+
+/// Floor pixels next to a box pixel (the concave crease) and floor pixels at
+/// least `far` pixels from every box pixel (open floor).
+fn crease_and_open_floor(prims: &[u32], width: usize, far: usize) -> (Vec<usize>, Vec<usize>) {
+    let height = prims.len() / width;
+    let is_box = |x: usize, y: usize| BOX.contains(&prims[y * width + x]);
+    let near_box = |x: usize, y: usize, r: usize| {
+        (y.saturating_sub(r)..(y + r + 1).min(height))
+            .any(|yy| (x.saturating_sub(r)..(x + r + 1).min(width)).any(|xx| is_box(xx, yy)))
+    };
+    let (mut crease, mut open) = (Vec::new(), Vec::new());
+    for y in 0..height {
+        for x in 0..width {
+            if !FLOOR.contains(&prims[y * width + x]) {
+                continue;
+            }
+            if near_box(x, y, 1) {
+                crease.push(y * width + x);
+            } else if !near_box(x, y, far) {
+                open.push(y * width + x);
+            }
+        }
+    }
+    (crease, open)
+}
+
+fn mean(values: impl Iterator<Item = f32>) -> f32 {
+    let (sum, count) = values.fold((0.0, 0), |(s, n), v| (s + v, n + 1));
+    assert!(count > 0);
+    sum / count as f32
+}
+
+#[test]
+fn ambient_occlusion_darkens_the_crease_more_than_open_floor() {
+    let dir = scene_dir();
+    let prims = prims(dir.path(), "160x120");
+    let (crease, open) = crease_and_open_floor(&prims, 160, 12);
+    assert!(
+        crease.len() > 20 && open.len() > 200,
+        "{} crease, {} open pixels",
+        crease.len(),
+        open.len()
+    );
+    let flags = [
+        "--set",
+        "spp=1",
+        "--set",
+        "shadows=false",
+        "--set",
+        "maxDepth=1",
+    ];
+    let off = small_scene(
+        dir.path(),
+        "workload3.dpp",
+        "160x120",
+        &[&flags[..], &["--set", "aoSamples=0"]].concat(),
+    );
+    let on = small_scene(
+        dir.path(),
+        "workload3.dpp",
+        "160x120",
+        &[
+            &flags[..],
+            &["--set", "aoSamples=16", "--set", "aoRange=0.2"],
+        ]
+        .concat(),
+    );
+    let darkening =
+        |pixels: &[usize]| mean(pixels.iter().map(|&i| off.luminance(i) - on.luminance(i)));
+    let (crease_darkening, open_darkening) = (darkening(&crease), darkening(&open));
+    assert!(
+        crease_darkening > 0.0,
+        "AO must not brighten: {crease_darkening}"
+    );
+    assert!(
+        crease_darkening > 2.0 * open_darkening + 0.002,
+        "crease {crease_darkening}, open floor {open_darkening}"
+    );
+}
+
+#[test]
+fn shadows_darken_the_floor_beside_the_box_and_nothing_far_away() {
+    let dir = scene_dir();
+    let prims = prims(dir.path(), "160x120");
+    let flags = [
+        "--set",
+        "spp=1",
+        "--set",
+        "aoSamples=0",
+        "--set",
+        "maxDepth=1",
+    ];
+    let lit = small_scene(
+        dir.path(),
+        "workload3.dpp",
+        "160x120",
+        &[&flags[..], &["--set", "shadows=false"]].concat(),
+    );
+    let shadowed = small_scene(dir.path(), "workload3.dpp", "160x120", &flags);
+    let floor: Vec<usize> = (0..prims.len())
+        .filter(|&i| FLOOR.contains(&prims[i]))
+        .collect();
+    let darker: Vec<usize> = floor
+        .iter()
+        .copied()
+        .filter(|&i| lit.luminance(i) - shadowed.luminance(i) > 0.02)
+        .collect();
+    // The light is up and to the left: the shadow falls on the floor to the box's right.
+    assert!(darker.len() > 30, "{} floor pixels in shadow", darker.len());
+    let box_pixels: Vec<usize> = (0..prims.len())
+        .filter(|&i| BOX.contains(&prims[i]))
+        .collect();
+    let mean_x = |pixels: &[usize]| mean(pixels.iter().map(|&i| (i % 160) as f32));
+    assert!(
+        mean_x(&darker) > mean_x(&box_pixels),
+        "the shadow is on the wrong side"
+    );
+    assert!(
+        shadowed.rgb.iter().zip(&lit.rgb).all(|(s, l)| s <= l),
+        "a shadow never brightens"
+    );
+}
+
+#[test]
+fn reflections_change_the_mirror_with_the_bounce_limit() {
+    let dir = scene_dir();
+    let prims = prims(dir.path(), "160x120");
+    let flags = ["--set", "spp=1", "--set", "aoSamples=0"];
+    let one = small_scene(
+        dir.path(),
+        "workload3.dpp",
+        "160x120",
+        &[&flags[..], &["--set", "maxDepth=1"]].concat(),
+    );
+    let three = small_scene(
+        dir.path(),
+        "workload3.dpp",
+        "160x120",
+        &[&flags[..], &["--set", "maxDepth=3"]].concat(),
+    );
+    let changed = |range: std::ops::Range<u32>| {
+        (0..prims.len())
+            .filter(|&i| {
+                range.contains(&prims[i]) && (one.luminance(i) - three.luminance(i)).abs() > 0.01
+            })
+            .count()
+    };
+    assert!(
+        changed(MIRROR) > 100,
+        "{} mirror pixels changed",
+        changed(MIRROR)
+    );
+    assert_eq!(changed(BOX), 0, "the box is not reflective");
+}
+
+#[test]
+fn four_samples_are_closer_than_one_to_a_sixteen_sample_reference() {
+    let dir = scene_dir();
+    let flags = ["--set", "aoSamples=0", "--set", "maxDepth=1"];
+    let one = small_scene(
+        dir.path(),
+        "workload3.dpp",
+        "80x60",
+        &[&flags[..], &["--set", "spp=1"]].concat(),
+    );
+    let four = small_scene(
+        dir.path(),
+        "workload3.dpp",
+        "80x60",
+        &[&flags[..], &["--set", "spp=4"]].concat(),
+    );
+    // One sample at the centre of each cell of a 4×4 grid per pixel, averaged in linear light.
+    let fine = small_scene(
+        dir.path(),
+        "workload3.dpp",
+        "320x240",
+        &[&flags[..], &["--set", "spp=1"]].concat(),
+    );
+    let reference: Vec<f32> = (0..80 * 60)
+        .map(|i| {
+            let (x, y) = (i % 80, i / 80);
+            mean((0..16).map(|k| fine.luminance((4 * y + k / 4) * 320 + 4 * x + k % 4)))
+        })
+        .collect();
+    let error = |image: &Image| {
+        mean((0..image.pixels()).map(|i| (image.luminance(i) - reference[i]).powi(2))).sqrt()
+    };
+    assert!(
+        error(&four) < 0.8 * error(&one),
+        "4 spp {} vs 1 spp {}",
+        error(&four),
+        error(&one)
+    );
+}
+
+#[test]
+fn compaction_fusion_and_threads_do_not_change_the_image() {
+    let dir = scene_dir();
+    let reference = small_scene(dir.path(), "workload3.dpp", "96x72", &["--threads", "2"]);
+    for extra in [
+        &["--set", "compactOn=false"][..],
+        &["--no-fuse"],
+        &["--threads", "1"],
+    ] {
+        let image = small_scene(dir.path(), "workload3.dpp", "96x72", extra);
+        assert!(image.rgb == reference.rgb, "{extra:?} changed the image");
+    }
+}
