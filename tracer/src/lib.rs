@@ -10,6 +10,7 @@ pub mod obj;
 mod random;
 pub mod scene;
 pub mod shading;
+pub mod volume;
 
 pub use camera::{Camera, CameraSetup, StandardView};
 pub use functors::{TracerRecords, MISS_PRIM};
@@ -71,6 +72,7 @@ pub fn functor_library() -> FunctorLibrary {
     let mut library = FunctorLibrary::default();
     dpp_runtime::generic::register_generic_functors(&mut library);
     register_tracer_functors(&mut library);
+    functors::isosurface::register_isosurface_functors(&mut library);
     library
 }
 
@@ -220,7 +222,8 @@ mod tests {
                 "hit: bool",
                 "sample: u32",
                 "weight: vec3",
-                "depth: u32"
+                "depth: u32",
+                "geometric: vec3"
             ]
         );
         let signature = |name| {

@@ -10,14 +10,20 @@
 //! - `Hit { t: f32, prim: u32, u: f32, v: f32 }`, a miss being
 //!   `t = +inf, prim = 4294967295, u = v = 0`;
 //! - `Surface { position: vec3, normal: vec3, view: vec3, scalar: f32, material: u32,
-//!   hit: bool, sample: u32, weight: vec3, depth: u32 }`: what shading needs of a
-//!   hit (see [`surface`]); a miss has `hit = false` and zeros except `sample`,
+//!   hit: bool, sample: u32, weight: vec3, depth: u32, geometric: vec3 }`: what
+//!   shading needs of a hit (see [`surface`]): `normal` is the (interpolated)
+//!   shading normal, `geometric` the hit triangle's own normal, both on the side
+//!   the ray comes from; a miss has `hit = false` and zeros except `sample`,
 //!   `weight` and `depth`.
 
 pub mod alive;
 pub mod anti_alias;
 pub mod camera_ray;
+pub mod case_triangles;
+pub mod cube_case;
+pub mod cube_triangle;
 pub mod intersect;
+pub mod isosurface;
 pub mod normal_color;
 pub mod occ_ray_gen;
 pub mod occluded;
@@ -38,7 +44,9 @@ use std::sync::Arc;
 pub const MISS_PRIM: u32 = u32::MAX;
 
 /// Secondary rays start this fraction of the scene diagonal off the surface,
-/// along the shading normal, so that they do not hit their own triangle.
+/// along the geometric normal on the side the ray came from (not along the
+/// shading normal, which can lean down to the triangle's plane), so that they
+/// neither hit their own triangle nor start behind it.
 pub const SURFACE_EPSILON: f32 = 1e-4;
 
 /// The ids of the tracer's record types in a library's registry.
@@ -84,8 +92,9 @@ pub(crate) fn register_records(records: &mut RecordRegistry) -> TracerRecords {
             ("sample".into(), ElemType::U32),
             ("weight".into(), ElemType::Vec3),
             ("depth".into(), ElemType::U32),
+            ("geometric".into(), ElemType::Vec3),
         ],
-        doc: "a shading point: position, unit shading normal facing the ray, unit vector towards the ray origin, interpolated scalar, material id; hit = false for a miss; sample, weight and depth of its ray".into(),
+        doc: "a shading point: position, unit shading normal facing the ray, unit vector towards the ray origin, interpolated scalar, material id; hit = false for a miss; sample, weight and depth of its ray; unit geometric (triangle) normal facing the ray, along which secondary rays leave".into(),
     });
     TracerRecords { ray, hit, surface }
 }
@@ -222,6 +231,8 @@ pub(crate) struct SurfaceRecord {
     pub sample: u32,
     pub weight: Vec3,
     pub depth: u32,
+    /// The hit triangle's unit normal on the side the ray comes from.
+    pub geometric: Vec3,
 }
 
 impl SurfaceRecord {
@@ -237,13 +248,32 @@ impl SurfaceRecord {
             sample,
             weight,
             depth,
+            geometric: Vec3::ZERO,
         }
     }
 
-    /// The start of a secondary ray: off the surface along the normal.
+    /// The start of a secondary ray: off the surface along the geometric normal,
+    /// on the side the ray came from. (The shading normal only approximates the
+    /// surface: it can lean so far from the triangle's normal that an offset
+    /// along it leaves the origin on, or behind, the triangle's plane, and the
+    /// ray passes through its own triangle.)
     #[inline]
     pub fn offset_origin(&self, epsilon: f32) -> Vec3 {
-        self.position + self.normal * epsilon
+        self.position + self.geometric * epsilon
+    }
+
+    /// `dir` turned into the geometric normal's side of the surface: mirrored in
+    /// the triangle's plane when it points into (or along) the surface, unchanged
+    /// otherwise. Directions about the shading normal can point into the surface
+    /// where the shading normal leans away from the geometric one.
+    #[inline]
+    pub fn above_surface(&self, dir: Vec3) -> Vec3 {
+        let below = dir.dot(self.geometric);
+        if below > 0.0 {
+            dir
+        } else {
+            dir - 2.0 * below * self.geometric
+        }
     }
 }
 
@@ -258,6 +288,7 @@ pub(crate) struct SurfaceColumns<'a> {
     pub sample: &'a [u32],
     pub weight: &'a [Vec3],
     pub depth: &'a [u32],
+    pub geometric: &'a [Vec3],
 }
 
 impl<'a> SurfaceColumns<'a> {
@@ -272,6 +303,7 @@ impl<'a> SurfaceColumns<'a> {
             sample: view.field(6).as_u32(),
             weight: view.field(7).as_vec3(),
             depth: view.field(8).as_u32(),
+            geometric: view.field(9).as_vec3(),
         }
     }
 
@@ -291,6 +323,7 @@ impl<'a> SurfaceColumns<'a> {
             sample: self.sample[index],
             weight: self.weight[index],
             depth: self.depth[index],
+            geometric: self.geometric[index],
         }
     }
 }
@@ -306,12 +339,13 @@ pub(crate) struct SurfaceWriter<'a> {
     sample: &'a mut Vec<u32>,
     weight: &'a mut Vec<Vec3>,
     depth: &'a mut Vec<u32>,
+    geometric: &'a mut Vec<Vec3>,
 }
 
 impl<'a> SurfaceWriter<'a> {
     pub fn new(column: &'a mut Column, capacity: usize) -> Result<SurfaceWriter<'a>, FunctorError> {
-        let [position, normal, view, scalar, material, hit, sample, weight, depth] =
-            record_fields_mut::<9>(column)?;
+        let [position, normal, view, scalar, material, hit, sample, weight, depth, geometric] =
+            record_fields_mut::<10>(column)?;
         let writer = SurfaceWriter {
             position: position.as_vec3_mut(),
             normal: normal.as_vec3_mut(),
@@ -322,6 +356,7 @@ impl<'a> SurfaceWriter<'a> {
             sample: sample.as_u32_mut(),
             weight: weight.as_vec3_mut(),
             depth: depth.as_u32_mut(),
+            geometric: geometric.as_vec3_mut(),
         };
         writer.position.reserve(capacity);
         writer.normal.reserve(capacity);
@@ -332,6 +367,7 @@ impl<'a> SurfaceWriter<'a> {
         writer.sample.reserve(capacity);
         writer.weight.reserve(capacity);
         writer.depth.reserve(capacity);
+        writer.geometric.reserve(capacity);
         Ok(writer)
     }
 
@@ -346,6 +382,7 @@ impl<'a> SurfaceWriter<'a> {
         self.sample.push(surface.sample);
         self.weight.push(surface.weight);
         self.depth.push(surface.depth);
+        self.geometric.push(surface.geometric);
     }
 }
 

@@ -12,7 +12,7 @@
 //! base    = colormap((scalar - min) / (max - min)) * Kd
 //! local   = ambient * (1 - occlusion) * base
 //!         + sum over visible lights j with n·l > 0 of
-//!             att_j * color_j * (base * n·l + Ks * max(n·h, 0)^Ns)
+//!             att_j * color_j * (base * n·l + Ks * max(n·h, 0)^Ns)    (no Ks term where n·v <= 0)
 //! att_j   = intensity_j / (1 + falloff * (d_j / diagonal)^2)
 //! rgb     = weight * (1 - reflectivity) * local           (a miss: weight * background)
 //! ```

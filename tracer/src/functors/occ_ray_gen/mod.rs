@@ -3,9 +3,12 @@
 //! the paper's ambient-occlusion rays.
 //!
 //! Lane `j` of surface `i` is a cosine-weighted direction in the hemisphere
-//! about the normal, from `range * scene.diagonal` long (`range` is a fraction
-//! of the scene diagonal), starting `SURFACE_EPSILON * scene.diagonal` off the
-//! surface along the normal. The two random numbers come from a stateless PCG
+//! about the shading normal, from `range * scene.diagonal` long (`range` is a
+//! fraction of the scene diagonal), starting `SURFACE_EPSILON * scene.diagonal`
+//! off the surface along the geometric normal (on the ray's side). Where the
+//! shading normal leans away from the geometric one, a direction that would go
+//! into the surface is mirrored in the triangle's plane, so that no occlusion ray
+//! starts into its own surface. The two random numbers come from a stateless PCG
 //! hash of `(sample, depth, lane)`, so images are deterministic and independent
 //! of chunking and thread count. Non-hit surfaces (and `range <= 0`) give dead
 //! rays, which `occluded` reports as not blocked.
@@ -80,7 +83,7 @@ impl Functor for OccRayGen {
                 let (u1, u2) = random_pair(surface.sample, surface.depth, lane);
                 out.push(RayRecord {
                     origin: surface.offset_origin(epsilon),
-                    dir: cosine_hemisphere(surface.normal, u1, u2),
+                    dir: surface.above_surface(cosine_hemisphere(surface.normal, u1, u2)),
                     tmax: length,
                     sample: surface.sample,
                     weight: surface.weight,
@@ -146,6 +149,7 @@ mod tests {
             sample,
             weight: Vec3::ONE,
             depth,
+            geometric: normal,
         }
     }
 
@@ -190,6 +194,49 @@ mod tests {
             let mean = cosines / lanes as f32;
             assert!((mean - 2.0 / 3.0).abs() < 0.02, "{normal}: {mean}");
         }
+    }
+
+    #[test]
+    fn rays_stay_on_the_triangles_side_when_the_normal_leans_into_it() {
+        // A shading normal leaning below its triangle's plane: offset along it,
+        // the rays started under the small square, and the hemisphere about it
+        // reaches into the surface, so the square (or the floor under it) blocked
+        // most of them. They start off the triangle's front, and directions into
+        // the surface are mirrored out of it.
+        let fixture = Fixture::new();
+        let diagonal = fixture.resources.scene.bounds.diagonal();
+        let normal = Vec3::new(1.0, 0.0, -0.3).normalize();
+        let mut leaning = surface(normal, 3, 0);
+        leaning.geometric = Vec3::Z;
+        let surfaces = fixture.surfaces(&[leaning]);
+        let out = fixture
+            .run_grouped(
+                "occRayGen",
+                &[HostValue::Float(0.1)],
+                256,
+                0,
+                &[surfaces.view()],
+            )
+            .unwrap();
+        let rays = read_rays(&out[0]);
+        let origin = Vec3::new(0.5, 0.5, SURFACE_EPSILON * diagonal);
+        let into_the_surface = (0..256)
+            .filter(|&lane| {
+                let (u1, u2) = random_pair(3, 0, lane);
+                cosine_hemisphere(normal, u1, u2).z < 0.0
+            })
+            .count();
+        assert!(
+            into_the_surface > 50,
+            "{into_the_surface}: the test should reach into the surface"
+        );
+        for ray in &rays {
+            assert_eq!(ray.origin, origin);
+            assert!(ray.dir.z >= 0.0, "{}", ray.dir);
+            assert!((ray.dir.length() - 1.0).abs() < 1e-5);
+        }
+        let blocked = fixture.run("occluded", &[], 0, &[out[0].view()]).unwrap();
+        assert!(blocked[0].view().as_bool().iter().all(|&b| !b));
     }
 
     #[test]

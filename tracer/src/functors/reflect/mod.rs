@@ -3,7 +3,9 @@
 //!
 //! Where the material's reflectivity is above 0 and `surf.depth + 1 < maxDepth`,
 //! the ray starts `SURFACE_EPSILON * scene.diagonal` off the surface along the
-//! normal, in the direction `d - 2 (d·n) n` (`d = -view`), with `tmax = inf`,
+//! geometric normal `g` (on the ray's side), in the direction `d - 2 (d·n) n`
+//! (`d = -view`, `n` the shading normal), or `d - 2 (d·g) g` where that would
+//! go into the surface (the shading normal leaning away from `g`), with `tmax = inf`,
 //! `depth = surf.depth + 1` and `weight = surf.weight * reflectivity`: an
 //! untinted mirror, so that with the shader's `1 - reflectivity` the pixel is the
 //! blend `(1 - r) local + r reflected`. Everywhere else the ray is dead (`tmax =
@@ -16,6 +18,7 @@ use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
 };
+use glam::Vec3;
 
 pub struct Reflect {
     signature: Signature,
@@ -82,7 +85,11 @@ impl Functor for Reflect {
                 continue;
             }
             let incoming = -surface.view;
-            let dir = incoming - 2.0 * incoming.dot(surface.normal) * surface.normal;
+            let mirror = |normal: Vec3| incoming - 2.0 * incoming.dot(normal) * normal;
+            let mut dir = mirror(surface.normal);
+            if dir.dot(surface.geometric) <= 0.0 {
+                dir = mirror(surface.geometric);
+            }
             out.push(RayRecord {
                 origin: surface.offset_origin(epsilon),
                 dir: dir.normalize_or_zero(),
@@ -127,6 +134,7 @@ mod tests {
             sample: 9,
             weight: Vec3::new(1.0, 0.5, 0.25),
             depth,
+            geometric: Vec3::Z,
         }
     }
 
@@ -149,6 +157,32 @@ mod tests {
         assert_eq!((rays[0].sample, rays[0].depth), (9, 1));
         assert!((rays[1].dir - Vec3::Z).length() < 1e-6);
         assert_eq!(rays[1].depth, 2);
+    }
+
+    #[test]
+    fn a_reflection_never_goes_into_the_surface() {
+        // The shading normal leans so far from the triangle's that the mirror
+        // direction about it points below the triangle's plane: the ray is mirrored
+        // about the geometric normal instead, and starts off the triangle's front.
+        let fixture = mirror_fixture();
+        let diagonal = fixture.resources.scene.bounds.diagonal();
+        let view = Vec3::new(0.28, 0.0, 0.96);
+        let mut leaning = surface(view, 0);
+        leaning.normal = Vec3::new(3f32.sqrt() / 2.0, 0.0, 0.5);
+        let about_normal = -view + 2.0 * view.dot(leaning.normal) * leaning.normal;
+        assert!(
+            about_normal.z < 0.0,
+            "the test should reflect into the surface"
+        );
+        let surfaces = fixture.surfaces(&[leaning]);
+        let out = fixture.run("reflect", &[], 0, &[surfaces.view()]).unwrap();
+        let ray = read_rays(&out[0])[0];
+        assert!(
+            (ray.dir - Vec3::new(-0.28, 0.0, 0.96)).length() < 1e-6,
+            "{}",
+            ray.dir
+        );
+        assert_eq!(ray.origin, Vec3::new(0.5, 0.5, SURFACE_EPSILON * diagonal));
     }
 
     #[test]

@@ -5,9 +5,14 @@
 //! - ambient: `ambient * (1 - occlusion) * base`, `occlusion` clamped to [0, 1]
 //!   (the fraction of blocked ambient-occlusion rays);
 //! - per light `j` whose bit is set in `visible` and that lies in front of the
-//!   surface: diffuse `base * n·l` and specular `Ks * max(n·h, 0)^Ns`, both
-//!   times the light's colour and the attenuation `intensity / (1 + falloff *
-//!   (d / scene.diagonal)^2)`;
+//!   surface (`n·l > 0`, `n` the shading normal): diffuse `base * n·l` and
+//!   specular `Ks * max(n·h, 0)^Ns` (none where `n·v <= 0`), both times the
+//!   light's colour and the attenuation `intensity / (1 + falloff * (d /
+//!   scene.diagonal)^2)`. The triangle's own normal does not gate the light: a
+//!   triangle near the terminator of a smooth surface can face slightly away from
+//!   a light its interpolated normal faces, and cutting it off there makes the
+//!   terminator follow the triangles (whether such a point is shadowed is the
+//!   shadow ray's business, which starts off the triangle's own plane);
 //! - `base` is the colour map at `(scalar - min) / (max - min)` times `Kd`;
 //! - the local colour is scaled by `1 - reflectivity` (the reflection ray carries
 //!   the rest) and by `surf.weight`; a miss gives the background times
@@ -114,6 +119,8 @@ impl Functor for Shader {
             let open = 1.0 - occlusion[index].clamp(0.0, 1.0);
             let mut local = ambient * open * base;
             let mask = visible[index];
+            let normal = surface.normal;
+            let sees_viewer = normal.dot(surface.view) > 0.0;
             for (light_index, light) in lights.iter().enumerate() {
                 if mask & (1 << light_index) == 0 {
                     continue;
@@ -121,7 +128,7 @@ impl Functor for Shader {
                 let to_light = light.position - surface.position;
                 let distance = to_light.length();
                 let direction = to_light / distance;
-                let diffuse = surface.normal.dot(direction);
+                let diffuse = normal.dot(direction);
                 // Also false for NaN (a light exactly at the point).
                 let in_front = diffuse > 0.0;
                 if !in_front {
@@ -129,8 +136,12 @@ impl Functor for Shader {
                 }
                 let scaled = distance * inverse_diagonal;
                 let attenuation = light.intensity / (1.0 + falloff * scaled * scaled);
-                let half = (direction + surface.view).normalize_or_zero();
-                let specular = surface.normal.dot(half).max(0.0).powf(material.ns);
+                let specular = if sees_viewer {
+                    let half = (direction + surface.view).normalize_or_zero();
+                    normal.dot(half).max(0.0).powf(material.ns)
+                } else {
+                    0.0
+                };
                 local += attenuation * light.color * (base * diffuse + material.ks * specular);
             }
             colors.push(local * (1.0 - material.reflectivity) * surface.weight);
@@ -172,6 +183,7 @@ mod tests {
             sample: 0,
             weight: Vec3::ONE,
             depth: 0,
+            geometric: Vec3::Z,
         }
     }
 

@@ -3,11 +3,13 @@
 //! surface point towards light `j`.
 //!
 //! The ray starts `SURFACE_EPSILON * scene.diagonal` off the surface along the
-//! normal, has a unit direction and `tmax` = the distance to the light minus
-//! that epsilon, so the light itself never blocks it. It keeps the surface's
-//! `sample`, `weight` and `depth`. A non-hit surface, or a light on the far side
-//! of the surface (`n·l <= 0`, which the shader does not light anyway), gives a
-//! dead ray (`tmax = 0`), which `occluded` reports as not blocked.
+//! geometric normal (on the ray's side, so never on or behind the triangle's
+//! plane, which the shading normal does not ensure), has a unit direction and
+//! `tmax` = the distance to the light minus that epsilon, so the light itself
+//! never blocks it. It keeps the surface's `sample`, `weight` and `depth`. A
+//! non-hit surface, or a light on the far side of the surface (`n·l <= 0`, which
+//! the shader does not light anyway), gives a dead ray (`tmax = 0`), which
+//! `occluded` reports as not blocked.
 
 use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
 use crate::scene::TraceResources;
@@ -111,6 +113,7 @@ mod tests {
             sample,
             weight: Vec3::ONE,
             depth: 0,
+            geometric: normal,
         }
     }
 
@@ -159,6 +162,30 @@ mod tests {
             .unwrap();
         let blocked = fixture.run("occluded", &[], 0, &[out[0].view()]).unwrap();
         assert_eq!(blocked[0].view().as_bool(), &[true, false, false]);
+    }
+
+    #[test]
+    fn a_normal_leaning_into_the_surface_does_not_start_the_ray_inside_it() {
+        // A shading normal that leans below its triangle's plane (records from
+        // interpolated normals can lean down to it, near silhouettes and creases):
+        // offset along it, the ray started under the small square, which then
+        // blocked the light it faces. It starts off the triangle's front instead.
+        let mut fixture = Fixture::new();
+        let light = PointLight::new(Vec3::new(5.0, 0.5, 1.0), 1.0);
+        fixture.set_shading(|shading| shading.set_lights(vec![light]).unwrap());
+        let epsilon = SURFACE_EPSILON * fixture.resources.scene.bounds.diagonal();
+        let mut surface = surface_at(Vec3::new(0.5, 0.5, 0.0), Vec3::new(1.0, 0.0, -0.2), 0);
+        surface.normal = surface.normal.normalize();
+        surface.geometric = Vec3::Z;
+        let surfaces = fixture.surfaces(&[surface]);
+        let out = fixture
+            .run_grouped("shadowRay", &[], 1, 0, &[surfaces.view()])
+            .unwrap();
+        let rays = read_rays(&out[0]);
+        assert!(rays[0].tmax > 0.0);
+        assert_eq!(rays[0].origin, Vec3::new(0.5, 0.5, epsilon));
+        let blocked = fixture.run("occluded", &[], 0, &[out[0].view()]).unwrap();
+        assert_eq!(blocked[0].view().as_bool(), &[false]);
     }
 
     #[test]

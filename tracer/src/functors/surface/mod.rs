@@ -6,10 +6,16 @@
 //!   or the smooth area-weighted ones the scene computed at load), normalised and
 //!   turned to the side of the triangle the ray comes from (the side the
 //!   geometric normal facing the ray points to); the face normal where the
-//!   interpolation vanishes;
+//!   interpolation vanishes. Where it would face away from the viewer (or nearly
+//!   so: `normal·view < MIN_VIEW_COSINE`, near silhouettes, where the
+//!   interpolated normal leans past the triangle), it is bent towards `view`
+//!   just far enough that `normal·view = MIN_VIEW_COSINE`;
 //! - `view`: the unit vector from the point towards the ray origin (`-dir`);
 //! - `scalar`: the barycentric interpolation of the per-vertex scalars;
-//! - `material`: the triangle's material id.
+//! - `material`: the triangle's material id;
+//! - `geometric`: the triangle's unit normal on the ray's side (the view vector
+//!   for a degenerate triangle): secondary rays start off the surface along it,
+//!   and their directions are kept on its side.
 //!
 //! A miss gives `hit = false` and zeros except `sample`, `weight` and `depth`;
 //! a dead ray (`tmax <= 0`) gives a miss with zero weight, so it shades to black.
@@ -21,6 +27,10 @@ use dpp_runtime::{
     RecordId, Signature, TypePattern,
 };
 use glam::Vec3;
+
+/// The least `normal·view` of a shading normal: the interpolated normal is bent
+/// towards the viewer up to this, so no shading point faces away from the ray.
+pub const MIN_VIEW_COSINE: f32 = 0.01;
 
 pub struct SurfaceFunctor {
     signature: Signature,
@@ -47,7 +57,7 @@ impl SurfaceFunctor {
                     ty: TypePattern::Exact(ElemType::Record(surface)),
                 }],
                 named: vec![],
-                doc: "the shading point of a hit: position, interpolated normal facing the ray, view vector, interpolated scalar, material (miss: hit = false)",
+                doc: "the shading point of a hit: position, interpolated normal facing the ray, view vector, interpolated scalar, material, geometric normal facing the ray (miss: hit = false)",
             },
         }
     }
@@ -115,6 +125,7 @@ impl Functor for SurfaceFunctor {
             } else {
                 interpolated
             };
+            let normal = facing_the_viewer(normal, view, facing);
             let scalar = scalars.map_or(position.y, |s| w * s[a] + u * s[b] + v * s[c]);
             out.push(SurfaceRecord {
                 position,
@@ -126,14 +137,35 @@ impl Functor for SurfaceFunctor {
                 sample,
                 weight: rays.weight[index],
                 depth,
+                geometric: facing,
             });
         }
         Ok(())
     }
 }
 
+/// `normal` unchanged where `normal·view >= MIN_VIEW_COSINE`; otherwise the unit
+/// vector nearest to it with `normal·view = MIN_VIEW_COSINE` (it keeps its
+/// component across the view direction and gets just enough along it). When the
+/// normal is (anti)parallel to `view` there is no nearest one, and the geometric
+/// normal, which faces the ray, is used.
+#[inline]
+pub(crate) fn facing_the_viewer(normal: Vec3, view: Vec3, geometric: Vec3) -> Vec3 {
+    let cosine = normal.dot(view);
+    if cosine >= MIN_VIEW_COSINE || view == Vec3::ZERO {
+        return normal;
+    }
+    let across = (normal - cosine * view).normalize_or_zero();
+    if across == Vec3::ZERO {
+        return geometric;
+    }
+    let sine = (1.0 - MIN_VIEW_COSINE * MIN_VIEW_COSINE).sqrt();
+    (sine * across + MIN_VIEW_COSINE * view).normalize()
+}
+
 #[cfg(test)]
 mod tests {
+    use super::{facing_the_viewer, MIN_VIEW_COSINE};
     use crate::functors::test_support::{probe_rays, ray, read_surfaces, Fixture};
     use crate::functors::{RayRecord, SurfaceRecord, MISS_PRIM};
     use crate::mesh::TriangleMesh;
@@ -201,6 +233,7 @@ mod tests {
         let above = surfaces[0];
         assert!((above.position - Vec3::new(0.25, 0.5, 0.0)).length() < 1e-6);
         assert!((above.normal - expected_normal).length() < 1e-6);
+        assert_eq!(above.geometric, Vec3::Z);
         assert_eq!(above.view, Vec3::Z);
         assert!((above.scalar - 12.5).abs() < 1e-5);
         assert!(above.hit);
@@ -211,9 +244,46 @@ mod tests {
         // From below, the normal is turned towards the ray.
         let below = surfaces[1];
         assert!((below.normal + expected_normal).length() < 1e-6);
+        assert_eq!(below.geometric, Vec3::NEG_Z);
         assert_eq!(below.view, Vec3::NEG_Z);
         assert!((below.scalar - 12.5).abs() < 1e-5);
         assert_eq!((below.sample, below.weight), (8, Vec3::ONE));
+    }
+
+    #[test]
+    fn a_normal_facing_away_from_the_viewer_is_bent_towards_it() {
+        // Vertex normals leaning 60 degrees towards +x over a triangle in z = 0,
+        // seen at a grazing angle from -x: the interpolated normal faces away
+        // from the viewer (n·v < 0), where Blinn-Phong is meaningless.
+        let lean = Vec3::new(3f32.sqrt() / 2.0, 0.0, 0.5);
+        let mesh = TriangleMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            triangles: vec![[0, 1, 2]],
+            normals: Some(vec![lean; 3]),
+            scalars: None,
+        };
+        let fixture = Fixture::with_scene(TraceScene::new(mesh).unwrap());
+        let target = Vec3::new(0.25, 0.25, 0.0);
+        let dir = Vec3::new(1.0, 0.0, -0.2).normalize();
+        let rays = fixture.rays(&[ray(target - 2.0 * dir, dir, 9.0, 0)]);
+        let hit = fixture.run("intersect", &[], 0, &[rays.view()]).unwrap();
+        let out = fixture
+            .run("surface", &[], 0, &[rays.view(), hit[0].view()])
+            .unwrap();
+        let surface = read_surfaces(&out[0])[0];
+        assert!(surface.hit);
+        assert!(lean.dot(surface.view) < 0.0);
+        assert_eq!(surface.geometric, Vec3::Z);
+        let cosine = surface.normal.dot(surface.view);
+        assert!((cosine - MIN_VIEW_COSINE).abs() < 1e-5, "{cosine}");
+        assert!((surface.normal.length() - 1.0).abs() < 1e-5);
+        // Bent within the plane of the normal and the view vector, and still on
+        // the triangle's front.
+        assert!(surface.normal.y.abs() < 1e-6 && surface.normal.z > 0.0);
+        // A normal the viewer sees is left alone.
+        let n = Vec3::new(0.6, 0.0, 0.8);
+        assert_eq!(facing_the_viewer(n, Vec3::Z, Vec3::Z), n);
+        assert_eq!(facing_the_viewer(Vec3::NEG_Z, Vec3::Z, Vec3::Z), Vec3::Z);
     }
 
     #[test]
@@ -264,6 +334,7 @@ mod tests {
         assert!((surfaces[0].position - Vec3::new(0.25, 0.5, 0.0)).length() < 1e-6);
         assert!((surfaces[0].scalar - 0.5).abs() < 1e-6);
         assert_eq!(surfaces[0].normal, Vec3::Z);
+        assert_eq!(surfaces[0].geometric, Vec3::Z);
         assert!((surfaces[1].position - Vec3::new(3.0, 0.0, -1.0)).length() < 1e-6);
     }
 

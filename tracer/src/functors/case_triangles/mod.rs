@@ -1,0 +1,67 @@
+//! `caseTriangles(case: u32) -> (count: u32)`: how many triangles marching
+//! cubes makes in a cell of this case (0 to 5), from the generated tables
+//! ([`crate::functors::isosurface::tables`]).
+
+use crate::functors::isosurface::tables::tables;
+use dpp_runtime::{
+    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
+    Signature, TypePattern,
+};
+
+pub struct CaseTriangles {
+    signature: Signature,
+}
+
+impl CaseTriangles {
+    pub fn new() -> CaseTriangles {
+        CaseTriangles {
+            signature: Signature {
+                name: "caseTriangles",
+                kind: FunctorKind::Map,
+                inputs: vec![ArrayParam {
+                    name: "case",
+                    ty: TypePattern::Exact(ElemType::U32),
+                }],
+                outputs: vec![ArrayParam {
+                    name: "count",
+                    ty: TypePattern::Exact(ElemType::U32),
+                }],
+                named: vec![],
+                doc: "the number of marching-cubes triangles (0..5) of a cell case",
+            },
+        }
+    }
+}
+
+impl Default for CaseTriangles {
+    fn default() -> Self {
+        CaseTriangles::new()
+    }
+}
+
+impl Functor for CaseTriangles {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        _ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        let counts = &tables().counts;
+        let cases = inputs[0].as_u32();
+        let out = outputs[0].as_u32_mut();
+        out.reserve(cases.len());
+        for &case in cases {
+            let count = counts.get(case as usize).ok_or_else(|| {
+                FunctorError(format!(
+                    "caseTriangles: case {case} is not a marching-cubes case (0..255)"
+                ))
+            })?;
+            out.push(*count as u32);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,70 @@
+//! `cubeCase(cell: u32) -> (case: u32) [level: float]`: the marching-cubes case
+//! of a cell of the run's volume (see [`crate::functors::isosurface`]): bit `n`
+//! is set when corner `n` (at offset `(n & 1, n >> 1 & 1, n >> 2 & 1)`) is below
+//! `level`. Used as `iota(volume.cells) → map<cubeCase>(level: level)`.
+
+use crate::functors::isosurface::{case_index, cell_origin, corner_values, level, run_volume};
+use dpp_runtime::{
+    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
+    HostType, NamedParam, Signature, TypePattern,
+};
+
+pub struct CubeCase {
+    signature: Signature,
+}
+
+impl CubeCase {
+    pub fn new() -> CubeCase {
+        CubeCase {
+            signature: Signature {
+                name: "cubeCase",
+                kind: FunctorKind::Map,
+                inputs: vec![ArrayParam {
+                    name: "cell",
+                    ty: TypePattern::Exact(ElemType::U32),
+                }],
+                outputs: vec![ArrayParam {
+                    name: "case",
+                    ty: TypePattern::Exact(ElemType::U32),
+                }],
+                named: vec![NamedParam {
+                    name: "level",
+                    ty: HostType::Float,
+                    default: None,
+                    doc: "the isovalue; corners below it are inside",
+                }],
+                doc: "the marching-cubes case (0..255) of a volume cell: bit n set when corner n is below level",
+            },
+        }
+    }
+}
+
+impl Default for CubeCase {
+    fn default() -> Self {
+        CubeCase::new()
+    }
+}
+
+impl Functor for CubeCase {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        let volume = run_volume(ctx, "cubeCase")?;
+        let level = level(ctx, "cubeCase")?;
+        let cells = inputs[0].as_u32();
+        let out = outputs[0].as_u32_mut();
+        out.reserve(cells.len());
+        for &cell in cells {
+            let origin = cell_origin(volume, cell, "cubeCase")?;
+            out.push(case_index(&corner_values(volume, origin), level));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,95 @@
+//! `cubeTriangle(cell: u32, lane: u32) -> (tri: Triangle) [level: float]`:
+//! triangle number `lane` of a cell of the run's volume, as marching cubes
+//! makes it (the cell's case is recomputed from its 8 corners).
+//!
+//! Each corner lies on a cell edge, linearly interpolated between the edge's
+//! two samples to where the field equals `level`, in world space
+//! ([`crate::volume::Volume::position`]); its normal is the field gradient (central
+//! differences) interpolated the same way and normalised, pointing towards
+//! increasing values; its scalar is the field interpolated the same way. The
+//! corners wind counter-clockwise seen from the side of higher values. See
+//! [`crate::functors::isosurface`] for the conventions.
+
+use crate::functors::isosurface::tables::tables;
+use crate::functors::isosurface::{
+    case_index, cell_origin, corner_values, edge_vertex, level, run_volume, TriangleRecord,
+    TriangleWriter,
+};
+use dpp_runtime::{
+    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
+    HostType, NamedParam, RecordId, Signature, TypePattern,
+};
+
+pub struct CubeTriangle {
+    signature: Signature,
+}
+
+impl CubeTriangle {
+    pub fn new(triangle: RecordId) -> CubeTriangle {
+        CubeTriangle {
+            signature: Signature {
+                name: "cubeTriangle",
+                kind: FunctorKind::Map,
+                inputs: vec![
+                    ArrayParam {
+                        name: "cell",
+                        ty: TypePattern::Exact(ElemType::U32),
+                    },
+                    ArrayParam {
+                        name: "lane",
+                        ty: TypePattern::Exact(ElemType::U32),
+                    },
+                ],
+                outputs: vec![ArrayParam {
+                    name: "tri",
+                    ty: TypePattern::Exact(ElemType::Record(triangle)),
+                }],
+                named: vec![NamedParam {
+                    name: "level",
+                    ty: HostType::Float,
+                    default: None,
+                    doc: "the isovalue (the same as cubeCase's)",
+                }],
+                doc: "triangle `lane` of a volume cell's marching-cubes surface at level: corners on the cell edges, gradient normals, interpolated scalars",
+            },
+        }
+    }
+}
+
+impl Functor for CubeTriangle {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        let volume = run_volume(ctx, "cubeTriangle")?;
+        let level = level(ctx, "cubeTriangle")?;
+        let tables = tables();
+        let (cells, lanes) = (inputs[0].as_u32(), inputs[1].as_u32());
+        let mut out = TriangleWriter::new(&mut outputs[0], cells.len())?;
+        for (&cell, &lane) in cells.iter().zip(lanes) {
+            let origin = cell_origin(volume, cell, "cubeTriangle")?;
+            let values = corner_values(volume, origin);
+            let case = case_index(&values, level);
+            let triangles = tables.case_triangles(case);
+            let Some(edges) = triangles.get(lane as usize) else {
+                return Err(FunctorError(format!(
+                    "cubeTriangle: cell {cell} has {} triangles at level {level}, no triangle {lane}",
+                    triangles.len()
+                )));
+            };
+            let vertices = edges.map(|edge| edge_vertex(volume, origin, &values, edge, level));
+            out.push(TriangleRecord {
+                corners: vertices.map(|v| v.0),
+                normals: vertices.map(|v| v.1),
+                scalars: vertices.map(|v| v.2),
+            });
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,278 @@
+//! From the isosurface pipeline's `Triangle` output to a [`TriangleMesh`], and
+//! mesh files: OBJ (positions, normals) and binary little-endian PLY
+//! (positions, normals, a `scalar` per vertex).
+
+use crate::mesh::TriangleMesh;
+use dpp_runtime::{Column, ColumnView, ElemType};
+use glam::Vec3;
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+use thiserror::Error;
+
+/// The column given to [`triangles_to_mesh`] is not an array of `Triangle` records.
+#[derive(Clone, Debug, Error, PartialEq)]
+#[error(
+    "expected an array of Triangle records (a, b, c, na, nb, nc: vec3; sa, sb, sc: f32), got {0}"
+)]
+pub struct NotTriangles(pub String);
+
+/// The field columns of an array of `Triangle` records.
+pub struct TriangleColumns<'a> {
+    pub corners: [&'a [Vec3]; 3],
+    pub normals: [&'a [Vec3]; 3],
+    pub scalars: [&'a [f32]; 3],
+}
+
+impl<'a> TriangleColumns<'a> {
+    /// The fields of `view`, checked by shape (9 fields: 6 `vec3`, then 3 `f32`).
+    pub fn new(view: &ColumnView<'a>) -> Result<TriangleColumns<'a>, NotTriangles> {
+        let ColumnView::Record { fields, .. } = view else {
+            return Err(NotTriangles(format!("{:?} elements", view.elem_type())));
+        };
+        let types: Vec<ElemType> = fields.iter().map(ColumnView::elem_type).collect();
+        let mut expected = vec![ElemType::Vec3; 6];
+        expected.extend([ElemType::F32; 3]);
+        if types != expected {
+            return Err(NotTriangles(format!("a record with fields {types:?}")));
+        }
+        Ok(TriangleColumns {
+            corners: [0, 1, 2].map(|i| fields[i].as_vec3()),
+            normals: [3, 4, 5].map(|i| fields[i].as_vec3()),
+            scalars: [6, 7, 8].map(|i| fields[i].as_f32()),
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.corners[0].len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// The triangles of the isosurface pipeline's `triangles` output as a mesh with
+/// per-vertex normals and scalars, triangles in output order.
+///
+/// Without `weld` every triangle gets its own three vertices. With `weld`,
+/// vertices at the same position (quantised to 2⁻²⁰ of the bounding box's
+/// diagonal) become one, keeping the normal and scalar of the first triangle
+/// that uses it (shared vertices are computed bit-identically by every cell, so
+/// they agree), and triangles that collapse (two corners welded into one) are
+/// dropped, so triangle `i` of the mesh is then not always triangle `i` of the
+/// output.
+pub fn triangles_to_mesh(triangles: &Column, weld: bool) -> Result<TriangleMesh, NotTriangles> {
+    let view = triangles.view();
+    let columns = TriangleColumns::new(&view)?;
+    let n = columns.len();
+    let mut mesh = TriangleMesh {
+        positions: Vec::with_capacity(if weld { n / 2 + 3 } else { 3 * n }),
+        triangles: Vec::with_capacity(n),
+        normals: Some(Vec::new()),
+        scalars: Some(Vec::new()),
+    };
+    let normals = mesh.normals.as_mut().unwrap();
+    let scalars = mesh.scalars.as_mut().unwrap();
+    if !weld {
+        for t in 0..n {
+            let first = mesh.positions.len() as u32;
+            for i in 0..3 {
+                mesh.positions.push(columns.corners[i][t]);
+                normals.push(columns.normals[i][t]);
+                scalars.push(columns.scalars[i][t]);
+            }
+            mesh.triangles.push([first, first + 1, first + 2]);
+        }
+        return Ok(mesh);
+    }
+    let (mut min, mut max) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    for corner in columns.corners {
+        for p in corner.iter().filter(|p| p.is_finite()) {
+            min = min.min(*p);
+            max = max.max(*p);
+        }
+    }
+    let diagonal = if min.cmple(max).all() {
+        (max - min).length() as f64
+    } else {
+        0.0
+    };
+    let quantum = (diagonal / f64::from(1u32 << 20)).max(f64::MIN_POSITIVE);
+    let key = |p: Vec3| p.to_array().map(|c| (c as f64 / quantum).round() as i64);
+    let mut index: HashMap<[i64; 3], u32> = HashMap::with_capacity(n);
+    for t in 0..n {
+        let corners: [u32; 3] = std::array::from_fn(|i| {
+            let p = columns.corners[i][t];
+            *index.entry(key(p)).or_insert_with(|| {
+                mesh.positions.push(p);
+                normals.push(columns.normals[i][t]);
+                scalars.push(columns.scalars[i][t]);
+                mesh.positions.len() as u32 - 1
+            })
+        });
+        let [a, b, c] = corners;
+        if a != b && b != c && c != a {
+            mesh.triangles.push(corners);
+        }
+    }
+    Ok(mesh)
+}
+
+/// Writes `mesh` as Wavefront OBJ: `v` lines, `vn` lines when it has normals,
+/// and one `f` per triangle (`f a//a b//b c//c` with normals). OBJ has no
+/// per-vertex scalar: scalars are not written (use [`write_ply`]).
+pub fn write_obj(mesh: &TriangleMesh, path: &Path) -> std::io::Result<()> {
+    let mut out = BufWriter::new(File::create(path)?);
+    writeln!(
+        out,
+        "# isosurface written by dpp: {} vertices, {} triangles",
+        mesh.positions.len(),
+        mesh.triangles.len()
+    )?;
+    for p in &mesh.positions {
+        writeln!(out, "v {} {} {}", p.x, p.y, p.z)?;
+    }
+    if let Some(normals) = &mesh.normals {
+        for n in normals {
+            writeln!(out, "vn {} {} {}", n.x, n.y, n.z)?;
+        }
+    }
+    let with_normals = mesh.normals.is_some();
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|v| v + 1);
+        if with_normals {
+            writeln!(out, "f {a}//{a} {b}//{b} {c}//{c}")?;
+        } else {
+            writeln!(out, "f {a} {b} {c}")?;
+        }
+    }
+    out.flush()
+}
+
+/// Writes `mesh` as binary little-endian PLY: vertex properties `x y z`, then
+/// `nx ny nz` when the mesh has normals and `scalar` when it has scalars (all
+/// `float`), and faces as `list uchar uint vertex_indices`.
+pub fn write_ply(mesh: &TriangleMesh, path: &Path) -> std::io::Result<()> {
+    let mut out = BufWriter::new(File::create(path)?);
+    let mut header =
+        String::from("ply\nformat binary_little_endian 1.0\ncomment isosurface written by dpp\n");
+    header.push_str(&format!("element vertex {}\n", mesh.positions.len()));
+    for name in ["x", "y", "z"] {
+        header.push_str(&format!("property float {name}\n"));
+    }
+    if mesh.normals.is_some() {
+        for name in ["nx", "ny", "nz"] {
+            header.push_str(&format!("property float {name}\n"));
+        }
+    }
+    if mesh.scalars.is_some() {
+        header.push_str("property float scalar\n");
+    }
+    header.push_str(&format!(
+        "element face {}\nproperty list uchar uint vertex_indices\nend_header\n",
+        mesh.triangles.len()
+    ));
+    out.write_all(header.as_bytes())?;
+    for (v, p) in mesh.positions.iter().enumerate() {
+        let mut values = p.to_array().to_vec();
+        if let Some(normals) = &mesh.normals {
+            values.extend(normals[v].to_array());
+        }
+        if let Some(scalars) = &mesh.scalars {
+            values.push(scalars[v]);
+        }
+        for value in values {
+            out.write_all(&value.to_le_bytes())?;
+        }
+    }
+    for t in &mesh.triangles {
+        out.write_all(&[3u8])?;
+        for v in t {
+            out.write_all(&v.to_le_bytes())?;
+        }
+    }
+    out.flush()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::functors::isosurface::{
+        register_isosurface_functors, TriangleRecord, TriangleWriter,
+    };
+    use dpp_runtime::FunctorLibrary;
+
+    /// Two triangles sharing the edge (1,0,0)-(0,1,0).
+    fn column() -> Column {
+        let mut library = FunctorLibrary::default();
+        let ty = register_isosurface_functors(&mut library);
+        let mut column = Column::with_capacity(ElemType::Record(ty), 2, &library.records);
+        let mut writer = TriangleWriter::new(&mut column, 2).unwrap();
+        writer.push(TriangleRecord {
+            corners: [Vec3::ZERO, Vec3::X, Vec3::Y],
+            normals: [Vec3::Z; 3],
+            scalars: [1.0, 2.0, 3.0],
+        });
+        writer.push(TriangleRecord {
+            corners: [Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+            normals: [Vec3::Z; 3],
+            scalars: [2.0, 4.0, 3.0],
+        });
+        column
+    }
+
+    #[test]
+    fn welding_shares_vertices() {
+        let column = column();
+        let loose = triangles_to_mesh(&column, false).unwrap();
+        assert_eq!(loose.positions.len(), 6);
+        assert_eq!(loose.triangles, [[0, 1, 2], [3, 4, 5]]);
+        let welded = triangles_to_mesh(&column, true).unwrap();
+        assert_eq!(welded.positions.len(), 4);
+        assert_eq!(welded.triangles, [[0, 1, 2], [1, 3, 2]]);
+        assert_eq!(welded.scalars.as_deref(), Some(&[1.0, 2.0, 3.0, 4.0][..]));
+        assert_eq!(welded.normals.as_ref().unwrap().len(), 4);
+        welded.validate().unwrap();
+        assert!(triangles_to_mesh(&Column::U32(vec![1]), true).is_err());
+    }
+
+    #[test]
+    fn obj_round_trips_through_the_loader() {
+        let mesh = triangles_to_mesh(&column(), true).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("iso.obj");
+        write_obj(&mesh, &path).unwrap();
+        let back = crate::obj::load_obj(&path).unwrap();
+        assert_eq!(back.positions, mesh.positions);
+        assert_eq!(back.triangles, mesh.triangles);
+        assert_eq!(back.normals, mesh.normals);
+    }
+
+    #[test]
+    fn ply_is_binary_little_endian_with_normals_and_scalars() {
+        let mesh = triangles_to_mesh(&column(), true).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("iso.ply");
+        write_ply(&mesh, &path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let end = b"end_header\n";
+        let body = bytes.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+        let header = std::str::from_utf8(&bytes[..body]).unwrap();
+        assert!(header.starts_with("ply\nformat binary_little_endian 1.0\n"));
+        assert!(header.contains("element vertex 4\n"));
+        assert!(header.contains("property float nz\nproperty float scalar\n"));
+        assert!(header.contains("element face 2\nproperty list uchar uint vertex_indices\n"));
+        let data = &bytes[body..];
+        assert_eq!(data.len(), 4 * 7 * 4 + 2 * 13);
+        let float = |at: usize| f32::from_le_bytes(data[at..at + 4].try_into().unwrap());
+        // Vertex 3: (1, 1, 0), normal +z, scalar 4.
+        let v3: Vec<f32> = (0..7).map(|i| float(3 * 28 + 4 * i)).collect();
+        assert_eq!(v3, [1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 4.0]);
+        let faces = &data[4 * 28..];
+        assert_eq!(faces[13], 3);
+        let index = |at: usize| u32::from_le_bytes(faces[at..at + 4].try_into().unwrap());
+        assert_eq!([index(14), index(18), index(22)], [1, 3, 2]);
+    }
+}

@@ -1,0 +1,315 @@
+//! Marching cubes as a pipeline (pipelines/isosurface.dpp) through the runtime:
+//! a sphere's area converges to 4πr², its surface is closed and consistently
+//! oriented (also for a noise field full of ambiguous faces), a plane gives the
+//! exact triangle count, and the triangles do not depend on fusion, chunk size
+//! or thread count.
+
+use dpp_runtime::compile::{compile_file, CompileOptions};
+use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
+use dpp_runtime::{Column, HostValue};
+use dpp_tracer::functors::isosurface::{
+    triangles_to_mesh, volume_uniforms, write_obj, write_ply, TriangleColumns, VolumeResources,
+};
+use dpp_tracer::volume::Volume;
+use dpp_tracer::TriangleMesh;
+use glam::{UVec3, Vec3};
+use std::collections::HashMap;
+use std::f64::consts::PI;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Samples of `f` on a grid of `dims` samples spaced `spacing` apart from `origin`.
+fn volume(dims: UVec3, origin: Vec3, spacing: Vec3, f: impl Fn(Vec3, UVec3) -> f32) -> Volume {
+    let mut values = Vec::with_capacity((dims.x * dims.y * dims.z) as usize);
+    for k in 0..dims.z {
+        for j in 0..dims.y {
+            for i in 0..dims.x {
+                let s = UVec3::new(i, j, k);
+                values.push(f(origin + spacing * s.as_vec3(), s));
+            }
+        }
+    }
+    Volume {
+        dims,
+        spacing,
+        origin,
+        values,
+    }
+}
+
+/// The unit box sampled `n`³ times.
+fn unit_box(n: u32, f: impl Fn(Vec3, UVec3) -> f32) -> Volume {
+    volume(
+        UVec3::splat(n),
+        Vec3::ZERO,
+        Vec3::splat(1.0 / (n - 1) as f32),
+        f,
+    )
+}
+
+const CENTER: Vec3 = Vec3::new(0.513, 0.493, 0.503);
+const RADIUS: f32 = 0.4;
+
+/// The distance to `CENTER`: the sphere of radius `RADIUS` at level `RADIUS`.
+fn sphere(n: u32) -> Volume {
+    unit_box(n, |p, _| (p - CENTER).length())
+}
+
+struct Run {
+    triangles: Arc<Column>,
+    count: i64,
+}
+
+fn run(volume: &Volume, level: f64, fuse: bool, chunk: usize) -> Run {
+    let library = dpp_tracer::functor_library();
+    let options = CompileOptions {
+        fuse,
+        overrides: vec![("level".to_string(), format!("{level:?}"))],
+    };
+    let pipeline = Path::new(env!("CARGO_MANIFEST_DIR")).join("../pipelines/isosurface.dpp");
+    let plan = compile_file(&pipeline, &library, &options)
+        .map_err(|failure| failure.render(false))
+        .unwrap();
+    let resources = VolumeResources {
+        volume: Arc::new(volume.clone()),
+    };
+    let uniforms = volume_uniforms(volume);
+    let context = RunContext {
+        library: &library,
+        uniforms: &uniforms,
+        resources: &resources,
+        chunk,
+    };
+    let result = run_plan(&plan, &context).unwrap();
+    let names: Vec<&str> = result.outputs.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["triangles", "count"]);
+    let OutputValue::Array(triangles) = result.outputs[0].1.clone() else {
+        panic!("triangles is an array")
+    };
+    let OutputValue::Host(HostValue::Int(count)) = result.outputs[1].1 else {
+        panic!("count is an integer")
+    };
+    assert_eq!(triangles.len() as i64, count);
+    Run { triangles, count }
+}
+
+fn run_default(volume: &Volume, level: f64) -> Run {
+    run(
+        volume,
+        level,
+        true,
+        dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
+    )
+}
+
+fn area(mesh: &TriangleMesh) -> f64 {
+    mesh.triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| mesh.positions[v as usize].as_dvec3());
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum()
+}
+
+/// The enclosed volume (positive when the triangles face outwards).
+fn signed_volume(mesh: &TriangleMesh) -> f64 {
+    mesh.triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| mesh.positions[v as usize].as_dvec3());
+            a.dot(b.cross(c)) / 6.0
+        })
+        .sum()
+}
+
+/// Every undirected edge is shared by exactly two triangles, and each directed
+/// edge appears once (consistent orientation). Returns V - E + F.
+fn assert_closed_and_oriented(mesh: &TriangleMesh) -> i64 {
+    let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
+    for &[a, b, c] in &mesh.triangles {
+        for edge in [(a, b), (b, c), (c, a)] {
+            *directed.entry(edge).or_default() += 1;
+        }
+    }
+    for (&(a, b), &n) in &directed {
+        assert_eq!(n, 1, "directed edge {a}->{b} used {n} times");
+        assert_eq!(
+            directed.get(&(b, a)),
+            Some(&1),
+            "edge {a}-{b} has one triangle"
+        );
+    }
+    let used: std::collections::HashSet<u32> = mesh.triangles.iter().flatten().copied().collect();
+    used.len() as i64 - (directed.len() / 2) as i64 + mesh.triangles.len() as i64
+}
+
+#[test]
+fn sphere_area_converges_to_four_pi_r_squared() {
+    let exact = 4.0 * PI * (RADIUS as f64).powi(2);
+    let mut errors = Vec::new();
+    for n in [24, 48, 96] {
+        let result = run_default(&sphere(n), RADIUS as f64);
+        let mesh = triangles_to_mesh(&result.triangles, false).unwrap();
+        let error = area(&mesh) / exact - 1.0;
+        eprintln!(
+            "sphere r = {RADIUS}, {n}³ samples: {} triangles, area error {:+.4}%",
+            result.count,
+            100.0 * error
+        );
+        errors.push(error.abs());
+    }
+    assert!(errors[2] < 0.01, "{errors:?}");
+    assert!(errors[2] < errors[0], "{errors:?}");
+}
+
+#[test]
+fn sphere_is_closed_oriented_outwards_and_has_gradient_normals() {
+    let result = run_default(&sphere(32), RADIUS as f64);
+    let mesh = triangles_to_mesh(&result.triangles, true).unwrap();
+    assert_eq!(
+        mesh.triangles.len() as i64,
+        result.count,
+        "nothing collapsed"
+    );
+    mesh.validate().unwrap();
+    let euler = assert_closed_and_oriented(&mesh);
+    assert_eq!(euler, 2, "a sphere");
+    let exact = 4.0 / 3.0 * PI * (RADIUS as f64).powi(3);
+    let enclosed = signed_volume(&mesh);
+    assert!(
+        (enclosed / exact - 1.0).abs() < 0.02,
+        "{enclosed} vs {exact}"
+    );
+    // Vertex normals point outwards, like the geometric ones; scalars are the level.
+    let normals = mesh.normals.as_ref().unwrap();
+    for (v, p) in mesh.positions.iter().enumerate() {
+        let radial = (*p - CENTER).normalize();
+        assert!(normals[v].dot(radial) > 0.99, "{} vs {radial}", normals[v]);
+        assert!((normals[v].length() - 1.0).abs() < 1e-5);
+        assert!((mesh.scalars.as_ref().unwrap()[v] - RADIUS).abs() < 1e-5);
+        assert!(((*p - CENTER).length() - RADIUS).abs() < 0.01);
+    }
+    for t in 0..mesh.triangles.len() {
+        let face = mesh.face_normal(t);
+        let [a, b, c] = mesh.triangles[t].map(|v| normals[v as usize]);
+        assert!(face.dot(a + b + c) > 0.0, "triangle {t}");
+    }
+}
+
+#[test]
+fn noise_with_ambiguous_faces_is_closed_and_oriented() {
+    // Pseudo-random values inside, 1 on the border: every case, ambiguous
+    // faces included, occurs, and the surface is closed.
+    let n = 14;
+    let hash = |s: UVec3| {
+        let mut h = s.x.wrapping_mul(0x9e37_79b9) ^ s.y.wrapping_mul(0x85eb_ca6b);
+        h ^= s.z.wrapping_mul(0xc2b2_ae35);
+        h ^= h >> 15;
+        h = h.wrapping_mul(0x2c1b_3c6d);
+        h ^= h >> 12;
+        (h >> 8) as f32 / (1u32 << 24) as f32
+    };
+    let noise = unit_box(n, |_, s| {
+        let border = s.min_element() == 0 || s.max_element() == n - 1;
+        if border {
+            1.0
+        } else {
+            hash(s)
+        }
+    });
+    for level in [0.3, 0.5, 0.7] {
+        let result = run_default(&noise, level);
+        assert!(result.count > 500, "{}", result.count);
+        let mesh = triangles_to_mesh(&result.triangles, true).unwrap();
+        assert_eq!(mesh.triangles.len() as i64, result.count);
+        assert_closed_and_oriented(&mesh);
+        assert!(signed_volume(&mesh) > 0.0);
+    }
+}
+
+#[test]
+fn a_plane_between_samples_makes_two_triangles_per_cell() {
+    // f = z on 9×6×5 samples spaced 1: the level 2.25 crosses one layer of 8×5 cells.
+    let plane = volume(UVec3::new(9, 6, 5), Vec3::ZERO, Vec3::ONE, |p, _| p.z);
+    let result = run_default(&plane, 2.25);
+    assert_eq!(result.count, 2 * 8 * 5);
+    let view = result.triangles.view();
+    let columns = TriangleColumns::new(&view).unwrap();
+    for t in 0..columns.len() {
+        for i in 0..3 {
+            assert_eq!(columns.corners[i][t].z, 2.25);
+            assert_eq!(columns.normals[i][t], Vec3::Z);
+            assert_eq!(columns.scalars[i][t], 2.25);
+        }
+        let [a, b, c] = columns.corners.map(|c| c[t]);
+        let face = (b - a).cross(c - a);
+        assert!(face.z > 0.0 && face.x == 0.0 && face.y == 0.0, "{face}");
+    }
+    let mesh = triangles_to_mesh(&result.triangles, true).unwrap();
+    assert_eq!(mesh.positions.len(), 9 * 6);
+    assert!((area(&mesh) - 40.0).abs() < 1e-4);
+    // Decreasing field (f = -z): the same triangles, facing down.
+    let flipped = volume(UVec3::new(9, 6, 5), Vec3::ZERO, Vec3::ONE, |p, _| -p.z);
+    let down = run_default(&flipped, -2.25);
+    assert_eq!(down.count, 80);
+    let mesh = triangles_to_mesh(&down.triangles, false).unwrap();
+    for t in 0..mesh.triangles.len() {
+        assert!(mesh.face_normal(t).z < 0.0);
+    }
+    // Levels outside the field's range give nothing.
+    for level in [-1.0, 100.0] {
+        let none = run_default(&plane, level);
+        assert_eq!(none.count, 0);
+    }
+}
+
+#[test]
+fn fusion_chunking_and_threads_do_not_change_the_triangles() {
+    let volume = unit_box(20, |p, _| {
+        (p - CENTER).length() + 0.05 * (9.0 * p.x).sin() * (7.0 * p.y).cos()
+    });
+    let reference = run(&volume, 0.35, true, 4096);
+    assert!(reference.count > 1000);
+    assert_eq!(
+        reference.triangles,
+        run(&volume, 0.35, false, 4096).triangles
+    );
+    assert_eq!(reference.triangles, run(&volume, 0.35, true, 7).triangles);
+    assert_eq!(
+        reference.triangles,
+        run(&volume, 0.35, false, 100).triangles
+    );
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let triangles = pool.install(|| run(&volume, 0.35, true, 64).triangles);
+        assert_eq!(reference.triangles, triangles, "{threads} threads");
+    }
+}
+
+#[test]
+fn mesh_files_round_trip() {
+    let result = run_default(&sphere(16), RADIUS as f64);
+    let mesh = triangles_to_mesh(&result.triangles, true).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("sphere.obj");
+    write_obj(&mesh, &obj).unwrap();
+    let back = dpp_tracer::obj::load_obj(&obj).unwrap();
+    assert_eq!(back.positions, mesh.positions);
+    assert_eq!(back.triangles, mesh.triangles);
+    assert_eq!(back.normals, mesh.normals);
+    let ply = dir.path().join("sphere.ply");
+    write_ply(&mesh, &ply).unwrap();
+    let bytes = std::fs::read(&ply).unwrap();
+    let header_end = b"end_header\n";
+    let body = bytes
+        .windows(header_end.len())
+        .position(|w| w == header_end)
+        .unwrap()
+        + header_end.len();
+    let expected = mesh.positions.len() * 7 * 4 + mesh.triangles.len() * 13;
+    assert_eq!(bytes.len() - body, expected);
+}
