@@ -3,8 +3,10 @@
 //! Exit status (spec §4): 0 on success, 2 on input errors (a malformed
 //! pipeline, bad arguments, an unreadable scene), 1 on run-time failures.
 
+mod colorbar;
 mod outputs;
 mod scene_setup;
+mod volume_setup;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use dpp_runtime::compile::plan_text::plan_to_text;
@@ -38,6 +40,44 @@ enum Command {
     },
     /// List every functor with its signature, and the uniforms.
     Functors,
+    /// Generate one of the paper's data sets procedurally, as a NIfTI volume.
+    Gen(GenArgs),
+    /// Extract an isosurface of a volume (with pipelines/isosurface.dpp) as a mesh.
+    Iso(IsoArgs),
+}
+
+#[derive(clap::Args)]
+struct GenArgs {
+    /// `rm` (Richtmyer–Meshkov mixing layer), `pbte` (lead telluride crystal) or `sphere`.
+    name: String,
+    /// Samples along x, y and z; the paper's grids are 128,128,128 to 400,400,256.
+    #[arg(long, default_value = "128,128,128", value_parser = parse_grid)]
+    grid: [u32; 3],
+    /// Where to write the volume (.nii or .nii.gz).
+    #[arg(short, long, value_name = "FILE.nii.gz")]
+    output: PathBuf,
+}
+
+#[derive(clap::Args)]
+struct IsoArgs {
+    /// A NIfTI volume (.nii, .nii.gz), or a raw brick with --raw.
+    volume: PathBuf,
+    /// The isovalue.
+    #[arg(long, allow_hyphen_values = true)]
+    level: f32,
+    /// The layout of a raw brick: `XxYxZ:u8|u16|f32[:le|:be][:header=N][:spacing=SX,SY,SZ]`.
+    #[arg(long, value_name = "SPEC")]
+    raw: Option<String>,
+    /// Where to write the mesh (.ply or .obj).
+    #[arg(short, long, value_name = "FILE.ply")]
+    output: PathBuf,
+    /// An edited isosurface pipeline instead of the built-in pipelines/isosurface.dpp.
+    #[arg(long = "iso-pipeline", value_name = "FILE.dpp")]
+    iso_pipeline: Option<PathBuf>,
+    #[arg(long)]
+    no_fuse: bool,
+    #[arg(long)]
+    threads: Option<usize>,
 }
 
 #[derive(clap::Args)]
@@ -98,6 +138,24 @@ struct RunArgs {
     /// Lights, colour map and materials from a TOML file (default: SCENE.toml beside an OBJ).
     #[arg(long = "scene-file", value_name = "FILE.toml")]
     scene_file: Option<PathBuf>,
+    /// `transparent` (PNG alpha from the pipeline's `alpha` output) or a display colour `R,G,B`.
+    #[arg(long, value_name = "transparent|R,G,B")]
+    background: Option<String>,
+    /// Draw a colour bar with the scalar range into the image.
+    #[arg(long)]
+    colorbar: bool,
+    /// For a volume scene: the isosurface level to render.
+    #[arg(long, allow_hyphen_values = true)]
+    iso: Option<f32>,
+    /// For a raw-brick scene: `XxYxZ:u8|u16|f32[:le|:be][:header=N][:spacing=SX,SY,SZ]`.
+    #[arg(long, value_name = "SPEC")]
+    raw: Option<String>,
+    /// For a volume scene: colour the surface by this second volume's values.
+    #[arg(long = "color-by", value_name = "VOLUME")]
+    color_by: Option<PathBuf>,
+    /// For a volume scene: an edited isosurface pipeline.
+    #[arg(long = "iso-pipeline", value_name = "FILE.dpp")]
+    iso_pipeline: Option<PathBuf>,
     /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
@@ -146,6 +204,8 @@ fn main() -> ExitCode {
         Command::Run(args) => run(*args, &library),
         Command::Plan(args) => plan(args, &library),
         Command::Check { files } => check(&files, &library),
+        Command::Gen(args) => generate(args),
+        Command::Iso(args) => iso(args, &library),
         Command::Functors => {
             print!("{}", functor_listing(&library));
             Ok(())
@@ -256,17 +316,25 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
 
     let shading = shading_overrides(&args).map_err(Failure::Input)?;
     let setup_start = Instant::now();
-    let setup = scene_setup::SceneSetup::new(&scene_setup::SceneRequest {
-        scene: args.scene.clone(),
-        size: args.size,
-        view: args.view.clone(),
-        eye: args.eye,
-        look_at: args.look_at,
-        up: args.up,
-        fov: args.fov,
-        scene_file: args.scene_file.clone(),
-        shading,
-    })
+    let setup = scene_setup::SceneSetup::new(
+        &scene_setup::SceneRequest {
+            scene: args.scene.clone(),
+            size: args.size,
+            view: args.view.clone(),
+            eye: args.eye,
+            look_at: args.look_at,
+            up: args.up,
+            fov: args.fov,
+            scene_file: args.scene_file.clone(),
+            shading,
+            iso: args.iso,
+            raw: args.raw.clone(),
+            color_by: args.color_by.clone(),
+            iso_pipeline: args.iso_pipeline.clone(),
+            fuse: !args.compile.no_fuse,
+        },
+        library,
+    )
     .map_err(Failure::Input)?;
     let setup_time = setup_start.elapsed();
 
@@ -304,15 +372,15 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 names.join(", ")
             )));
         };
-        outputs::write_output(
-            name,
-            value,
-            std::path::Path::new(path),
-            &setup.camera,
-            library,
-        )
-        .map_err(Failure::Run)?;
-        println!("wrote {name} to {path}");
+        let finish = if name == "image" {
+            image_finish(&args, &result.outputs, &setup)?
+        } else {
+            outputs::Finish::default()
+        };
+        let path = std::path::Path::new(path);
+        outputs::write_output(name, value, path, &setup.camera, library, &finish)
+            .map_err(Failure::Run)?;
+        println!("wrote {name} to {}", path.display());
     }
     if args.profile {
         eprint!(
@@ -323,7 +391,53 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     Ok(())
 }
 
+/// The transparent background and colour bar requested for the `image` output.
+fn image_finish<'a>(
+    args: &RunArgs,
+    outputs: &'a [(String, OutputValue)],
+    setup: &'a scene_setup::SceneSetup,
+) -> Result<outputs::Finish<'a>, Failure> {
+    let shading = &setup.resources.shading;
+    let alpha = match args.background.as_deref() {
+        Some("transparent") => match outputs.iter().find(|(n, _)| n == "alpha").map(|(_, v)| v) {
+            Some(OutputValue::Array(column)) if column.elem_type() == dpp_runtime::ElemType::F32 => {
+                Some(column.view().as_f32())
+            }
+            _ => {
+                return Err(Failure::Input(
+                    "error: --background transparent needs the pipeline to output `alpha` (coverage per pixel, f32)".into(),
+                ))
+            }
+        },
+        _ => None,
+    };
+    Ok(outputs::Finish {
+        alpha,
+        background: dpp_tracer::shading::linear_to_srgb(shading.background()),
+        colorbar: args
+            .colorbar
+            .then(|| (shading.colormap().srgb(), shading.scalar_range())),
+    })
+}
+
 fn shading_overrides(args: &RunArgs) -> Result<dpp_tracer::ShadingOverrides, String> {
+    let background = match args.background.as_deref() {
+        None | Some("transparent") => None,
+        Some(spec) => {
+            let parts: Vec<f32> = spec
+                .split(',')
+                .filter_map(|p| p.trim().parse().ok())
+                .collect();
+            match parts[..] {
+                [r, g, b] => Some([r, g, b]),
+                _ => {
+                    return Err(format!(
+                        "error: --background `{spec}` is not `transparent` or R,G,B"
+                    ))
+                }
+            }
+        }
+    };
     let lights = args
         .lights
         .iter()
@@ -340,7 +454,7 @@ fn shading_overrides(args: &RunArgs) -> Result<dpp_tracer::ShadingOverrides, Str
         lights: (!lights.is_empty()).then_some(lights),
         colormap: args.colormap.clone(),
         scalar_range,
-        background: None,
+        background,
     })
 }
 
@@ -370,6 +484,83 @@ fn profile_report(
     }
     text.push_str(&format!("whole run: {:.2} ms\n", run.as_secs_f64() * 1e3));
     text
+}
+
+fn generate(args: GenArgs) -> Result<(), Failure> {
+    let dataset = dpp_tracer::volume::generate::Dataset::from_name(&args.name)
+        .map_err(|e| Failure::Input(format!("error: {e}")))?;
+    let volume = dataset
+        .generate(glam::UVec3::from(args.grid))
+        .map_err(|e| Failure::Input(format!("error: {e}")))?;
+    volume
+        .write_nifti(&args.output)
+        .map_err(|e| Failure::Run(e.to_string()))?;
+    let (low, high) = volume.value_range().unwrap_or((0.0, 0.0));
+    println!(
+        "wrote {} ({}x{}x{} samples, values {low} to {high}; try --iso {})",
+        args.output.display(),
+        args.grid[0],
+        args.grid[1],
+        args.grid[2],
+        dataset.default_level()
+    );
+    Ok(())
+}
+
+fn iso(args: IsoArgs, library: &FunctorLibrary) -> Result<(), Failure> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.unwrap_or(0))
+        .build()
+        .map_err(|e| Failure::Input(format!("error: cannot start threads: {e}")))?;
+    let volume =
+        volume_setup::load_volume(&args.volume, args.raw.as_deref()).map_err(Failure::Input)?;
+    let request = volume_setup::IsoRequest {
+        level: args.level,
+        pipeline: args.iso_pipeline.clone(),
+        fuse: !args.no_fuse,
+    };
+    let start = Instant::now();
+    let mesh = pool
+        .install(|| volume_setup::isosurface(volume, &request, library))
+        .map_err(Failure::Input)?;
+    let elapsed = start.elapsed();
+    let extension = args
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let written = match extension.as_str() {
+        "ply" => dpp_tracer::functors::isosurface::write_ply(&mesh, &args.output),
+        "obj" => dpp_tracer::functors::isosurface::write_obj(&mesh, &args.output),
+        _ => {
+            return Err(Failure::Input(format!(
+                "error: cannot write `{}`: use a .ply or .obj file name",
+                args.output.display()
+            )))
+        }
+    };
+    written.map_err(|e| Failure::Run(format!("cannot write {}: {e}", args.output.display())))?;
+    println!(
+        "wrote {} ({} triangles, {} vertices; isosurface in {:.1} ms)",
+        args.output.display(),
+        mesh.triangles.len(),
+        mesh.positions.len(),
+        elapsed.as_secs_f64() * 1e3
+    );
+    Ok(())
+}
+
+fn parse_grid(text: &str) -> Result<[u32; 3], String> {
+    let parts: Vec<u32> = text
+        .split([',', 'x'])
+        .map(|p| p.trim().parse::<u32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("`{text}` is not X,Y,Z"))?;
+    match parts[..] {
+        [x, y, z] => Ok([x, y, z]),
+        _ => Err(format!("`{text}` is not three sizes X,Y,Z")),
+    }
 }
 
 fn parse_assignment(text: &str) -> Result<(String, String), String> {

@@ -1,6 +1,7 @@
 //! Writing pipeline outputs: colour arrays of one element per pixel become
 //! PNGs, any array can become a `.npy` (spec §3, `out`).
 
+use crate::colorbar::Canvas;
 use dpp_runtime::cpu::exec::OutputValue;
 use dpp_runtime::{Column, FunctorLibrary};
 use dpp_tracer::camera::Camera;
@@ -8,12 +9,24 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;
 
+/// How a colour image is finished before it is written.
+#[derive(Default)]
+pub struct Finish<'a> {
+    /// Coverage per pixel: the background becomes transparent.
+    pub alpha: Option<&'a [f32]>,
+    /// The display colour that missed rays were given (un-blended where transparent).
+    pub background: glam::Vec3,
+    /// A colour bar: the colour map's display colours and the scalar range.
+    pub colorbar: Option<(&'a [glam::Vec3], [f32; 2])>,
+}
+
 pub fn write_output(
     name: &str,
     value: &OutputValue,
     path: &Path,
     camera: &Camera,
     library: &FunctorLibrary,
+    finish: &Finish<'_>,
 ) -> Result<(), String> {
     let OutputValue::Array(column) = value else {
         return Err(format!(
@@ -26,7 +39,7 @@ pub fn write_output(
         .unwrap_or("")
         .to_ascii_lowercase();
     match extension.as_str() {
-        "png" => write_png(name, column, path, camera, library),
+        "png" => write_png(name, column, path, camera, library, finish),
         "npy" => write_npy(name, column, path, library),
         _ => Err(format!(
             "cannot write `{}`: use a .png or .npy file name",
@@ -41,6 +54,7 @@ fn write_png(
     path: &Path,
     camera: &Camera,
     library: &FunctorLibrary,
+    finish: &Finish<'_>,
 ) -> Result<(), String> {
     let (width, height) = (camera.width, camera.height);
     let pixels = width as usize * height as usize;
@@ -52,6 +66,19 @@ fn write_png(
     }
     let to_byte = |x: f32| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
     let result = match column {
+        Column::Vec3(colours) if finish.alpha.is_some() || finish.colorbar.is_some() => {
+            let mut canvas = match finish.alpha {
+                Some(alpha) => {
+                    Canvas::transparent(width, height, colours, alpha, finish.background)
+                }
+                None => Canvas::from_display(width, height, colours),
+            };
+            if let Some((lut, range)) = finish.colorbar {
+                canvas.draw_colorbar(lut, range);
+            }
+            let bytes: Vec<u8> = canvas.rgba.into_iter().flatten().collect();
+            image::RgbaImage::from_raw(width, height, bytes).map(|i| i.save(path))
+        }
         Column::Vec3(colours) => {
             let bytes: Vec<u8> = colours
                 .iter()

@@ -1,7 +1,9 @@
-//! From command-line arguments to what a run reads: the scene (loaded or
-//! built-in, BVH built once, outside any frame), the camera and the uniforms.
+//! From command-line arguments to what a run reads: the scene (a mesh, the
+//! isosurface of a volume, or the built-in scene; BVH built once, outside any
+//! frame), the camera, the shading and the uniforms.
 
-use dpp_runtime::Uniforms;
+use crate::volume_setup::{self, IsoRequest};
+use dpp_runtime::{FunctorLibrary, Uniforms};
 use dpp_tracer::builtin_scene::DEFAULT_RESOLUTION;
 use dpp_tracer::{
     Camera, CameraSetup, SceneFile, ShadingOverrides, StandardView, TraceResources, TraceScene,
@@ -21,6 +23,13 @@ pub struct SceneRequest {
     /// A scene file (TOML); without one, `SCENE.toml` beside an OBJ if it exists.
     pub scene_file: Option<PathBuf>,
     pub shading: ShadingOverrides,
+    /// For a volume: the isosurface level, a raw brick's layout (`XxYxZ:TYPE…`),
+    /// a second field to colour by, an edited isosurface pipeline, fusion.
+    pub iso: Option<f32>,
+    pub raw: Option<String>,
+    pub color_by: Option<PathBuf>,
+    pub iso_pipeline: Option<PathBuf>,
+    pub fuse: bool,
 }
 
 pub struct SceneSetup {
@@ -33,29 +42,33 @@ pub struct SceneSetup {
 
 impl SceneSetup {
     /// Errors are the user's input (a bad file, a bad camera): exit status 2.
-    pub fn new(request: &SceneRequest) -> Result<SceneSetup, String> {
-        let scene = match &request.scene {
-            None => TraceScene::builtin(DEFAULT_RESOLUTION),
-            Some(path) => match path
-                .extension()
-                .and_then(|e| e.to_str())
-                .map(str::to_ascii_lowercase)
-                .as_deref()
-            {
-                Some("obj") => TraceScene::from_obj(path),
-                _ => {
-                    return Err(format!(
-                        "error: cannot read scene `{}`: dpp reads .obj files",
-                        path.display()
-                    ))
-                }
-            },
-        }
-        .map_err(|e| match &request.scene {
-            Some(path) => format!("error: cannot use scene `{}`: {e}", path.display()),
-            None => format!("error: the built-in scene failed: {e}"),
-        })?;
+    pub fn new(request: &SceneRequest, library: &FunctorLibrary) -> Result<SceneSetup, String> {
+        let (scene, origin) = match &request.scene {
+            None => (
+                TraceScene::builtin(DEFAULT_RESOLUTION).map_err(|e| format!("error: the built-in scene failed: {e}"))?,
+                "built-in mixing layer".to_string(),
+            ),
+            Some(path) if volume_setup::is_volume_path(path) || request.raw.is_some() => {
+                (volume_scene(request, path, library)?, path.display().to_string())
+            }
+            Some(path) if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")) => (
+                TraceScene::from_obj(path).map_err(|e| format!("error: cannot use scene `{}`: {e}", path.display()))?,
+                path.display().to_string(),
+            ),
+            Some(path) => {
+                return Err(format!(
+                    "error: cannot read scene `{}`: dpp reads .obj meshes and .nii/.nii.gz volumes (raw bricks with --raw)",
+                    path.display()
+                ))
+            }
+        };
         let camera = camera(request, &scene).map_err(|e| format!("error: bad camera: {e}"))?;
+        let description = format!(
+            "{origin} ({} triangles), {}x{}",
+            scene.mesh.triangles.len(),
+            camera.width,
+            camera.height
+        );
         let mut resources =
             TraceResources::new(Arc::new(scene), Arc::new(CameraSetup::new(camera.clone())));
         let shading = Arc::make_mut(&mut resources.shading);
@@ -69,19 +82,6 @@ impl SceneSetup {
             .apply_overrides(&request.shading)
             .map_err(|e| format!("error: {e}"))?;
         let uniforms = resources.uniforms();
-        let scene = &resources.scene;
-        let description = format!(
-            "{} ({} triangles), {}x{}",
-            request
-                .scene
-                .as_ref()
-                .map_or("built-in mixing layer".to_string(), |p| p
-                    .display()
-                    .to_string()),
-            scene.mesh.triangles.len(),
-            camera.width,
-            camera.height
-        );
         Ok(SceneSetup {
             uniforms,
             resources,
@@ -91,13 +91,47 @@ impl SceneSetup {
     }
 }
 
+/// The isosurface of a volume, coloured by height or by a second field.
+fn volume_scene(
+    request: &SceneRequest,
+    path: &Path,
+    library: &FunctorLibrary,
+) -> Result<TraceScene, String> {
+    let volume = volume_setup::load_volume(path, request.raw.as_deref())?;
+    let Some(level) = request.iso else {
+        let range = volume.value_range().map_or(String::new(), |(lo, hi)| {
+            format!(" (its values run from {lo} to {hi})")
+        });
+        return Err(format!(
+            "error: `{}` is a volume: give the isosurface level with --iso LEVEL{range}",
+            path.display()
+        ));
+    };
+    let iso = IsoRequest {
+        level,
+        pipeline: request.iso_pipeline.clone(),
+        fuse: request.fuse,
+    };
+    let mut mesh = volume_setup::isosurface(volume, &iso, library)?;
+    // The surface's own values all equal the level: colour by height, or by a second field.
+    mesh.scalars = None;
+    if let Some(field) = &request.color_by {
+        let field = volume_setup::load_volume(field, None)?;
+        volume_setup::color_by(&mut mesh, &field);
+    }
+    TraceScene::new(mesh).map_err(|e| format!("error: the isosurface of `{}`: {e}", path.display()))
+}
+
 /// The scene file given, or `mesh.toml` beside `mesh.obj` when there is one.
 fn scene_file(request: &SceneRequest) -> Option<PathBuf> {
     if request.scene_file.is_some() {
         return request.scene_file.clone();
     }
-    let beside = request.scene.as_deref()?.with_extension("toml");
-    Path::exists(&beside).then_some(beside)
+    let scene = request.scene.as_deref()?;
+    let stem = scene.file_name()?.to_string_lossy();
+    let stem = stem.strip_suffix(".gz").unwrap_or(&stem);
+    let beside = scene.with_file_name(Path::new(stem).with_extension("toml"));
+    beside.exists().then_some(beside)
 }
 
 /// A standard view of the scene's bounds, with any of eye, look-at and up replaced.

@@ -333,3 +333,114 @@ fn exit_statuses_and_messages() {
         &["no output `nothing`"],
     );
 }
+
+#[test]
+fn volumes_generate_extract_and_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let w2 = pipeline("workload2.dpp");
+    let run = |args: &[&str]| dpp(args, dir.path());
+    let generated = run(&["gen", "sphere", "--grid", "24,24,24", "-o", "sphere.nii.gz"]);
+    assert!(generated.status.success(), "{}", text(&generated.stderr));
+    let extracted = run(&["iso", "sphere.nii.gz", "--level", "0", "-o", "sphere.ply"]);
+    assert!(extracted.status.success(), "{}", text(&extracted.stderr));
+    assert!(
+        text(&extracted.stdout).contains("triangles"),
+        "{}",
+        text(&extracted.stdout)
+    );
+    let rendered = run(&[
+        "run",
+        &w2,
+        "sphere.nii.gz",
+        "--iso",
+        "0",
+        "--size",
+        "32x24",
+        "-o",
+        "s.png",
+        "--colorbar",
+    ]);
+    assert!(rendered.status.success(), "{}", text(&rendered.stderr));
+    // The surface of a ball fills the middle of the front view.
+    let prims = run(&[
+        "run",
+        &pipeline("workload1.dpp"),
+        "sphere.nii.gz",
+        "--iso",
+        "0",
+        "--size",
+        "32x24",
+        "--out",
+        "prim=p.npy",
+    ]);
+    assert!(prims.status.success(), "{}", text(&prims.stderr));
+    let prims: Vec<u32> = read_npy(&dir.path().join("p.npy"));
+    assert_ne!(
+        prims[12 * 32 + 16],
+        u32::MAX,
+        "the centre pixel sees the sphere"
+    );
+    assert_eq!(prims[0], u32::MAX, "the corner pixel misses it");
+}
+
+#[test]
+fn volume_errors_are_input_errors() {
+    let w2 = pipeline("workload2.dpp");
+    let sphere = {
+        let dir = tempfile::tempdir().unwrap();
+        assert!(dpp(
+            &["gen", "sphere", "--grid", "12,12,12", "-o", "s.nii"],
+            dir.path()
+        )
+        .status
+        .success());
+        std::fs::read(dir.path().join("s.nii")).unwrap()
+    };
+    let truncated = String::from_utf8_lossy(&sphere[..400]).into_owned();
+    check(
+        &["gen", "spere", "-o", "x.nii"],
+        &[],
+        2,
+        &["did you mean", "sphere"],
+    );
+    check(
+        &["gen", "rm", "--grid", "1,4,4", "-o", "x.nii"],
+        &[],
+        2,
+        &["2 samples"],
+    );
+    check(
+        &["run", &w2, "bad.nii"],
+        &[("bad.nii", "not a volume at all, far too short")],
+        2,
+        &["bad.nii"],
+    );
+    check(
+        &["iso", "cut.nii", "--level", "0", "-o", "x.ply"],
+        &[("cut.nii", &truncated)],
+        2,
+        &["cut.nii"],
+    );
+    check(
+        &["run", &w2, "brick.raw", "--raw", "4x4x4:u8"],
+        &[("brick.raw", "too short")],
+        2,
+        &["brick.raw"],
+    );
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("s.nii"), &sphere).unwrap();
+    let no_level = dpp(&["run", &w2, "s.nii"], dir.path());
+    assert_eq!(no_level.status.code(), Some(2));
+    assert!(
+        text(&no_level.stderr).contains("--iso"),
+        "{}",
+        text(&no_level.stderr)
+    );
+    let outside = dpp(&["run", &w2, "s.nii", "--iso", "1000"], dir.path());
+    assert_eq!(outside.status.code(), Some(2));
+    assert!(
+        text(&outside.stderr).contains("does not cross"),
+        "{}",
+        text(&outside.stderr)
+    );
+}

@@ -464,3 +464,50 @@ fn compaction_fusion_and_threads_do_not_change_the_image() {
         assert!(image.rgb == reference.rgb, "{extra:?} changed the image");
     }
 }
+
+#[test]
+fn golden_image_with_a_colour_bar() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = render(
+        dir.path(),
+        "workload2.dpp",
+        &[
+            "--size",
+            "240x135",
+            "--colorbar",
+            "--colormap",
+            "cool-to-warm",
+        ],
+    );
+    check_golden("builtin_workload2_colorbar", &image);
+}
+
+#[test]
+fn a_transparent_background_is_clear_where_rays_miss() {
+    let dir = tempfile::tempdir().unwrap();
+    let pipeline = common::repo().join("pipelines/workload3.dpp");
+    let output = Command::new(env!("CARGO_BIN_EXE_dpp"))
+        .arg("run")
+        .arg(&pipeline)
+        .args([
+            "--size",
+            "64x36",
+            "--set",
+            "aoSamples=0",
+            "--background",
+            "transparent",
+            "-o",
+            "t.png",
+        ])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let image = image::open(dir.path().join("t.png")).unwrap().to_rgba8();
+    assert_eq!(image.get_pixel(0, 0)[3], 0, "a corner misses the scene");
+    assert_eq!(image.get_pixel(32, 18)[3], 255, "the centre sees it");
+}
