@@ -123,8 +123,8 @@ fn scene_dir() -> tempfile::TempDir {
     dir
 }
 
-/// Runs `dpp run PIPELINE [args]` in `dir` and returns the image it wrote.
-fn render(dir: &Path, pipeline: &str, args: &[&str]) -> Image {
+/// Runs `dpp run PIPELINE [args]` in `dir`, writing the image to `out.png`.
+fn run_dpp(dir: &Path, pipeline: &str, args: &[&str]) -> PathBuf {
     let pipeline = common::repo().join("pipelines").join(pipeline);
     let output = Command::new(env!("CARGO_BIN_EXE_dpp"))
         .arg("run")
@@ -139,7 +139,11 @@ fn render(dir: &Path, pipeline: &str, args: &[&str]) -> Image {
         "dpp run {args:?}: {}",
         String::from_utf8_lossy(&output.stderr)
     );
-    Image::load(&dir.join("out.png"))
+    dir.join("out.png")
+}
+
+fn render(dir: &Path, pipeline: &str, args: &[&str]) -> Image {
+    Image::load(&run_dpp(dir, pipeline, args))
 }
 
 fn small_scene(dir: &Path, pipeline: &str, size: &str, extra: &[&str]) -> Image {
@@ -224,31 +228,10 @@ fn the_golden_comparison_sees_a_missing_shadow() {
 
 /// Triangle ids per pixel (WORKLOAD1) for the same camera: which pixel sees what.
 fn prims(dir: &Path, size: &str) -> Vec<u32> {
-    let pipeline = common::repo().join("pipelines/workload1.dpp");
-    let mut args = vec![
-        "run".to_string(),
-        pipeline.display().to_string(),
-        "scene.obj".into(),
-        "--size".into(),
-        size.into(),
-    ];
-    args.extend(SCENE_VIEW.iter().map(|s| s.to_string()));
-    args.extend([
-        "--out".into(),
-        "prim=prim.npy".into(),
-        "-o".into(),
-        "normals.png".into(),
-    ]);
-    let output = Command::new(env!("CARGO_BIN_EXE_dpp"))
-        .args(&args)
-        .current_dir(dir)
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    let mut args = vec!["scene.obj", "--size", size];
+    args.extend_from_slice(SCENE_VIEW);
+    args.extend_from_slice(&["--out", "prim=prim.npy"]);
+    run_dpp(dir, "workload1.dpp", &args);
     let bytes = std::fs::read(dir.join("prim.npy")).unwrap();
     npyz::NpyFile::new(&bytes[..]).unwrap().into_vec().unwrap()
 }
@@ -485,29 +468,16 @@ fn golden_image_with_a_colour_bar() {
 #[test]
 fn a_transparent_background_is_clear_where_rays_miss() {
     let dir = tempfile::tempdir().unwrap();
-    let pipeline = common::repo().join("pipelines/workload3.dpp");
-    let output = Command::new(env!("CARGO_BIN_EXE_dpp"))
-        .arg("run")
-        .arg(&pipeline)
-        .args([
-            "--size",
-            "64x36",
-            "--set",
-            "aoSamples=0",
-            "--background",
-            "transparent",
-            "-o",
-            "t.png",
-        ])
-        .current_dir(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let image = image::open(dir.path().join("t.png")).unwrap().to_rgba8();
+    let args = [
+        "--size",
+        "64x36",
+        "--set",
+        "aoSamples=0",
+        "--background",
+        "transparent",
+    ];
+    let path = run_dpp(dir.path(), "workload3.dpp", &args);
+    let image = image::open(path).unwrap().to_rgba8();
     assert_eq!(image.get_pixel(0, 0)[3], 0, "a corner misses the scene");
     assert_eq!(image.get_pixel(32, 18)[3], 255, "the centre sees it");
 }

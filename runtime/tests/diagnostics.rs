@@ -2,14 +2,11 @@
 //! diagnostics (file:line:col, the source line, the span marked), pinned by
 //! snapshots. `use_cycle_b.dpp` is only reached through `use_cycle_a.dpp`.
 
-use dpp_runtime::{compile_file, CompileOptions, FunctorLibrary};
-use std::path::{Path, PathBuf};
+mod common;
 
-fn library() -> FunctorLibrary {
-    let mut library = FunctorLibrary::default();
-    dpp_runtime::generic::register_generic_functors(&mut library);
-    library
-}
+use common::library;
+use dpp_runtime::{compile_file, CompileOptions};
+use std::path::{Path, PathBuf};
 
 fn bad_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/bad")

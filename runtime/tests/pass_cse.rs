@@ -7,94 +7,16 @@
 //! unfused stages), and through the whole compiler fused and unfused. All
 //! three must give the same outputs, which are listed last.
 
-use dpp_runtime::compile::ir::{Node, Plan, VarInfo};
-use dpp_runtime::compile::plan_text::plan_to_text;
+mod common;
+
+use common::{check, compile, ops_text, pipelines_path, plan, run_text, trim_indent};
 use dpp_runtime::compile::{cse, fuse, load, lower, resolve, typecheck};
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
-use dpp_runtime::*;
-use std::path::{Path, PathBuf};
-
-fn library() -> FunctorLibrary {
-    let mut library = FunctorLibrary::default();
-    dpp_runtime::generic::register_generic_functors(&mut library);
-    library
-}
-
-/// Removes the indentation common to every non-blank line, and a leading newline.
-fn trim_indent(text: &str) -> String {
-    let text = text.strip_prefix('\n').unwrap_or(text);
-    let indent = text
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| l.len() - l.trim_start().len())
-        .min()
-        .unwrap_or(0);
-    text.lines()
-        .map(|l| if l.len() >= indent { &l[indent..] } else { "" })
-        .collect::<Vec<_>>()
-        .join("\n")
-}
-
-/// A file beside `pipelines/prelude.dpp`, so that `use "prelude.dpp"` works.
-fn path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../pipelines/cse_test.dpp")
-}
-
-fn column_text(column: &Column) -> String {
-    match column {
-        Column::Bool(v) => format!("{v:?}"),
-        Column::U32(v) => format!("{v:?}"),
-        Column::I32(v) => format!("{v:?}"),
-        Column::F32(v) => format!("{v:?}"),
-        other => format!("{other:?}"),
-    }
-}
-
-/// Runs `plan`; returns `name = value` lines.
-fn run(plan: &Plan, library: &FunctorLibrary) -> String {
-    let uniforms = Uniforms::default();
-    let context = RunContext {
-        library,
-        uniforms: &uniforms,
-        resources: &(),
-        chunk: 64,
-    };
-    match run_plan(plan, &context) {
-        Ok(result) => result
-            .outputs
-            .iter()
-            .map(|(name, value)| match value {
-                OutputValue::Array(column) => format!("{name} = {}\n", column_text(column)),
-                OutputValue::Host(value) => format!("{name} = {value}\n"),
-            })
-            .collect(),
-        Err(error) => format!("run-time error: {}\n", error.message),
-    }
-}
-
-fn plan(pipeline: &str, vars: Vec<VarInfo>, body: Vec<Node>, outputs: Vec<String>) -> Plan {
-    Plan {
-        pipeline: pipeline.to_string(),
-        fused: false,
-        params: Vec::new(),
-        vars,
-        body,
-        outputs,
-    }
-}
-
-/// `check!(source, @"expected")`: [`report`] against an inline snapshot.
-macro_rules! check {
-    ($source:expr, @$expected:literal) => {
-        insta::assert_snapshot!(report($source), @$expected)
-    };
-}
 
 /// The ops after CSE and the outputs of the runs (which must agree).
 fn report(source: &str) -> String {
     let source = trim_indent(source);
-    let library = library();
-    let path = path();
+    let library = common::library();
+    let path = pipelines_path("cse_test.dpp");
 
     // Passes 1–4, as the driver runs them.
     let mut sources = dpp_dsl::SourceMap::default();
@@ -112,23 +34,18 @@ fn report(source: &str) -> String {
     let mut vars = lowered.vars.clone();
     cse::eliminate_common_subexpressions(&mut body, &mut vars);
     let after = plan(&name, vars, body, lowered.outputs.clone());
-    let text = plan_to_text(&after, &library);
-    let mut text: String = text.lines().skip(1).map(|l| format!("{l}\n")).collect();
+    let mut text = ops_text(&after, &library);
 
     // The same program without CSE, and through the whole compiler.
     let stages = fuse::form_stages(lowered.body, &lowered.vars, false);
-    let without_cse = run(
+    let without_cse = run_text(
         &plan(&name, lowered.vars, stages, lowered.outputs),
         &library,
     );
     for fuse in [true, false] {
-        let options = CompileOptions {
-            fuse,
-            ..CompileOptions::default()
-        };
-        let compiled = compile_text(&path, &source, &library, &options).unwrap();
+        let compiled = compile(&path, &source, &library, fuse).unwrap();
         assert_eq!(
-            run(&compiled, &library),
+            run_text(&compiled, &library),
             without_cse,
             "CSE changed the outputs (fuse: {fuse})\n{text}"
         );

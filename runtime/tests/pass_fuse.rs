@@ -10,83 +10,16 @@
 //! unfused plan (`--no-fuse`) has one op per stage and the same ops, and RUNS
 //! both: their outputs must be identical, and are listed after the plan.
 
+mod common;
+
+use common::{check, library, pipelines_path, run_text, trim_indent};
 use dpp_runtime::compile::ir::Plan;
 use dpp_runtime::compile::plan_text::plan_to_text;
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
-use dpp_runtime::*;
-use std::path::{Path, PathBuf};
-
-fn library() -> FunctorLibrary {
-    let mut library = FunctorLibrary::default();
-    dpp_runtime::generic::register_generic_functors(&mut library);
-    library
-}
-
-/// Removes the indentation common to every non-blank line, and a leading newline.
-fn trim_indent(text: &str) -> String {
-    let text = text.strip_prefix('\n').unwrap_or(text);
-    let indent = text
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| l.len() - l.trim_start().len())
-        .min()
-        .unwrap_or(0);
-    text.lines()
-        .map(|l| if l.len() >= indent { &l[indent..] } else { "" })
-        .collect::<Vec<_>>()
-        .join("\n")
-}
-
-/// A file beside `pipelines/prelude.dpp`, so that `use "prelude.dpp"` works.
-fn path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../pipelines/fuse_test.dpp")
-}
-
-fn column_text(column: &Column) -> String {
-    match column {
-        Column::Bool(v) => format!("{v:?}"),
-        Column::U32(v) => format!("{v:?}"),
-        Column::I32(v) => format!("{v:?}"),
-        Column::F32(v) => format!("{v:?}"),
-        other => format!("{other:?}"),
-    }
-}
-
-/// Runs `plan`; returns `name = value` lines, or the run-time error.
-fn run(plan: &Plan, library: &FunctorLibrary) -> String {
-    let uniforms = Uniforms::default();
-    let context = RunContext {
-        library,
-        uniforms: &uniforms,
-        resources: &(),
-        chunk: 64,
-    };
-    match run_plan(plan, &context) {
-        Ok(result) => result
-            .outputs
-            .iter()
-            .map(|(name, value)| match value {
-                OutputValue::Array(column) => format!("{name} = {}\n", column_text(column)),
-                OutputValue::Host(value) => format!("{name} = {value}\n"),
-            })
-            .collect(),
-        Err(error) => format!("run-time error: {}\n", error.message),
-    }
-}
+use dpp_runtime::FunctorLibrary;
 
 fn compile(source: &str, fuse: bool, library: &FunctorLibrary) -> Plan {
-    let options = CompileOptions {
-        fuse,
-        ..CompileOptions::default()
-    };
-    compile_text(&path(), source, library, &options).unwrap_or_else(|e| panic!("{e}"))
-}
-
-/// `check!(source, @"expected")`: [`report`] against an inline snapshot.
-macro_rules! check {
-    ($source:expr, @$expected:literal) => {
-        insta::assert_snapshot!(report($source), @$expected)
-    };
+    common::compile(&pipelines_path("fuse_test.dpp"), source, library, fuse)
+        .unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// The fused plan's text and the outputs of the fused and unfused runs.
@@ -111,8 +44,8 @@ fn report(source: &str) -> String {
     assert_eq!(labels(&fused), labels(&unfused));
 
     let mut text = plan_to_text(&fused, &library);
-    let outputs = run(&fused, &library);
-    let unfused_outputs = run(&unfused, &library);
+    let outputs = run_text(&fused, &library);
+    let unfused_outputs = run_text(&unfused, &library);
     assert_eq!(
         outputs, unfused_outputs,
         "fused and unfused runs differ\n{text}"

@@ -7,10 +7,10 @@
 //! one per line. A program that compiles is also RUN, fused and unfused (the
 //! two must agree), and its outputs are listed after the nodes.
 
-use dpp_runtime::compile::ir::Plan;
-use dpp_runtime::compile::plan_text::plan_to_text;
+mod common;
+
+use common::{check, compile, diagnostics_text, ops_text, plan, run, trim_indent};
 use dpp_runtime::compile::{load, lower, resolve};
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
 use dpp_runtime::*;
 use std::path::Path;
 use std::sync::Arc;
@@ -40,8 +40,7 @@ impl Functor for Split {
 }
 
 fn library() -> FunctorLibrary {
-    let mut library = FunctorLibrary::default();
-    dpp_runtime::generic::register_generic_functors(&mut library);
+    let mut library = common::library();
     let u32_param = |name| ArrayParam {
         name,
         ty: TypePattern::Exact(ElemType::U32),
@@ -59,95 +58,12 @@ fn library() -> FunctorLibrary {
     library
 }
 
-/// Removes the indentation common to every non-blank line, and a leading newline.
-fn trim_indent(text: &str) -> String {
-    let text = text.strip_prefix('\n').unwrap_or(text);
-    let indent = text
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| l.len() - l.trim_start().len())
-        .min()
-        .unwrap_or(0);
-    text.lines()
-        .map(|l| if l.len() >= indent { &l[indent..] } else { "" })
-        .collect::<Vec<_>>()
-        .join("\n")
-}
-
-/// Every diagnostic as `code at line:col `text`: message`, labels and help below.
-fn diagnostics_text(failure: &CompileFailure) -> String {
-    let mut text = String::new();
-    let at = |span: dpp_dsl::Span| {
-        let (line, col) = failure.sources.line_col(span.file, span.start);
-        let source = failure.sources.text(span).lines().next().unwrap_or("");
-        format!("{line}:{col} `{source}`")
-    };
-    for d in &failure.diagnostics {
-        text.push_str(&format!(
-            "{} at {}: {}\n",
-            d.code,
-            at(d.labels[0].span),
-            d.message
-        ));
-        for label in &d.labels[1..] {
-            text.push_str(&format!("  {}: {}\n", at(label.span), label.message));
-        }
-        if let Some(help) = &d.help {
-            text.push_str(&format!("  help: {help}\n"));
-        }
-    }
-    text
-}
-
-fn column_text(column: &Column) -> String {
-    match column {
-        Column::Bool(v) => format!("{v:?}"),
-        Column::U32(v) => format!("{v:?}"),
-        Column::I32(v) => format!("{v:?}"),
-        Column::F32(v) => format!("{v:?}"),
-        other => format!("{other:?}"),
-    }
-}
-
-/// Runs `plan`; returns `name = value` lines.
-fn run(plan: &Plan, library: &FunctorLibrary) -> Result<String, String> {
-    let uniforms = Uniforms::default();
-    let context = RunContext {
-        library,
-        uniforms: &uniforms,
-        resources: &(),
-        chunk: 64,
-    };
-    let result = run_plan(plan, &context).map_err(|e| e.message)?;
-    Ok(result
-        .outputs
-        .iter()
-        .map(|(name, value)| match value {
-            OutputValue::Array(column) => format!("{name} = {}\n", column_text(column)),
-            OutputValue::Host(value) => format!("{name} = {value}\n"),
-        })
-        .collect())
-}
-
-/// `check!(source, @"expected")`: [`report`] against an inline snapshot.
-macro_rules! check {
-    ($source:expr, @$expected:literal) => {
-        insta::assert_snapshot!(report($source), @$expected)
-    };
-}
-
 /// Lowers `source`; returns the lowered nodes and the run's outputs, or the diagnostics.
 fn report(source: &str) -> String {
     let source = trim_indent(source);
     let library = library();
     let path = Path::new("lower.dpp");
-    let compiled = |fuse| {
-        let options = CompileOptions {
-            fuse,
-            ..CompileOptions::default()
-        };
-        compile_text(path, &source, &library, &options)
-    };
+    let compiled = |fuse| compile(path, &source, &library, fuse);
     let fused = match compiled(true) {
         Ok(plan) => plan,
         Err(failure) => return diagnostics_text(&failure),
@@ -162,16 +78,13 @@ fn report(source: &str) -> String {
     let program = resolve::resolve_program(&loaded, &records, &mut diagnostics).unwrap();
     let lowered = lower::lower_program(&program, &library, &mut diagnostics);
     assert!(diagnostics.is_empty(), "{diagnostics:?}");
-    let plan = Plan {
-        pipeline: program.pipeline.name.name.clone(),
-        fused: false,
-        params: Vec::new(),
-        vars: lowered.vars,
-        body: lowered.body,
-        outputs: lowered.outputs,
-    };
-    let text = plan_to_text(&plan, &library);
-    let mut text: String = text.lines().skip(1).map(|l| format!("{l}\n")).collect();
+    let plan = plan(
+        &program.pipeline.name.name,
+        lowered.vars,
+        lowered.body,
+        lowered.outputs,
+    );
+    let mut text = ops_text(&plan, &library);
 
     let outputs = run(&fused, &library);
     let unfused = run(&compiled(false).unwrap(), &library);

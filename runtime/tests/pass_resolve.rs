@@ -8,31 +8,13 @@
 //! files `load` read, in module order, then either a summary of the compiled
 //! plan or every diagnostic, one per line.
 
+mod common;
+
+use common::{check, library, pipelines_path, trim_indent};
 use dpp_runtime::compile::load::load_program;
-use dpp_runtime::{compile_file, CompileOptions, FunctorLibrary, Plan};
+use dpp_runtime::{compile_file, CompileOptions, Plan};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
-
-fn library() -> FunctorLibrary {
-    let mut library = FunctorLibrary::default();
-    dpp_runtime::generic::register_generic_functors(&mut library);
-    library
-}
-
-/// Removes the indentation common to every non-blank line, and a leading newline.
-fn trim_indent(text: &str) -> String {
-    let text = text.strip_prefix('\n').unwrap_or(text);
-    let indent = text
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| l.len() - l.trim_start().len())
-        .min()
-        .unwrap_or(0);
-    text.lines()
-        .map(|l| if l.len() >= indent { &l[indent..] } else { "" })
-        .collect::<Vec<_>>()
-        .join("\n")
-}
 
 /// Splits a fixture into `(path, text)` files; without markers it is `main.dpp`.
 fn parse_fixture(fixture: &str) -> Vec<(String, String)> {
@@ -102,21 +84,10 @@ fn summary(plan: &Plan) -> String {
     lines.join("\n")
 }
 
-/// `check!(fixture, @"expected")`: the report of [`report`] against an inline snapshot.
-macro_rules! check {
-    ($fixture:expr, @$expected:literal) => {
-        insta::assert_snapshot!(report($fixture), @$expected)
-    };
-}
-
 /// Writes the fixture, loads and compiles its entry file; returns the report.
 fn report(fixture: &str) -> String {
     let dir = TempDir::new();
-    std::fs::copy(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../pipelines/prelude.dpp"),
-        dir.0.join("prelude.dpp"),
-    )
-    .unwrap();
+    std::fs::copy(pipelines_path("prelude.dpp"), dir.0.join("prelude.dpp")).unwrap();
     let files = parse_fixture(fixture);
     for (path, text) in &files {
         let path = dir.0.join(path);

@@ -7,6 +7,9 @@
 //! the plan (`name: type, len = …` for arrays), then each stage's index space;
 //! or every diagnostic, one per line.
 
+mod common;
+
+use common::{check, diagnostics_text, trim_indent};
 use dpp_runtime::compile::ir::{node_reads, walk_nodes, Plan, VarType};
 use dpp_runtime::compile::plan_text::host_text;
 use dpp_runtime::compile::typecheck::node_writes;
@@ -47,8 +50,7 @@ impl Functor for MakePair {
 }
 
 fn library() -> FunctorLibrary {
-    let mut library = FunctorLibrary::default();
-    dpp_runtime::generic::register_generic_functors(&mut library);
+    let mut library = common::library();
     let pair = library.records.register(RecordType {
         name: "Pair".into(),
         fields: vec![("a".into(), ElemType::U32), ("b".into(), ElemType::F32)],
@@ -75,60 +77,9 @@ fn library() -> FunctorLibrary {
     library
 }
 
-/// Removes the indentation common to every non-blank line, and a leading newline.
-fn trim_indent(text: &str) -> String {
-    let text = text.strip_prefix('\n').unwrap_or(text);
-    let indent = text
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| l.len() - l.trim_start().len())
-        .min()
-        .unwrap_or(0);
-    text.lines()
-        .map(|l| if l.len() >= indent { &l[indent..] } else { "" })
-        .collect::<Vec<_>>()
-        .join("\n")
-}
-
-/// Every diagnostic as `code at line:col `text`: message`, labels and help below.
-fn diagnostics_text(failure: &CompileFailure) -> String {
-    let mut text = String::new();
-    let at = |span: dpp_dsl::Span| {
-        let (line, col) = failure.sources.line_col(span.file, span.start);
-        let source = failure.sources.text(span).lines().next().unwrap_or("");
-        format!("{line}:{col} `{source}`")
-    };
-    for d in &failure.diagnostics {
-        text.push_str(&format!(
-            "{} at {}: {}\n",
-            d.code,
-            at(d.labels[0].span),
-            d.message
-        ));
-        for label in &d.labels[1..] {
-            text.push_str(&format!("  {}: {}\n", at(label.span), label.message));
-        }
-        if let Some(help) = &d.help {
-            text.push_str(&format!("  help: {help}\n"));
-        }
-    }
-    text
-}
-
 fn compile(source: &str, library: &FunctorLibrary) -> Result<Plan, CompileFailure> {
-    compile_text(
-        Path::new("typecheck.dpp"),
-        &trim_indent(source),
-        library,
-        &CompileOptions::default(),
-    )
-}
-
-/// `check!(source, @"expected")`: [`report`] against an inline snapshot.
-macro_rules! check {
-    ($source:expr, @$expected:literal) => {
-        insta::assert_snapshot!(report($source), @$expected)
-    };
+    let path = Path::new("typecheck.dpp");
+    common::compile(path, &trim_indent(source), library, true)
 }
 
 /// The typed variables and the stages' index spaces, or the diagnostics.

@@ -2,6 +2,8 @@
 //! → plan → CPU backend) on random inputs, against plain sequential
 //! references; fused and unfused, on 1 and 2 threads, must agree bit for bit.
 
+mod common;
+
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
 use dpp_runtime::*;
 use proptest::prelude::*;
@@ -41,8 +43,7 @@ impl Functor for DataFunctor {
 }
 
 fn library() -> FunctorLibrary {
-    let mut library = FunctorLibrary::default();
-    dpp_runtime::generic::register_generic_functors(&mut library);
+    let mut library = common::library();
     for (name, ty) in [
         ("u32Data", ElemType::U32),
         ("f32Data", ElemType::F32),
