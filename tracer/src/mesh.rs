@@ -150,23 +150,80 @@ impl TriangleMesh {
         (v1 - v0).cross(v2 - v0)
     }
 
-    /// Smooth, area-weighted vertex normals: each vertex gets the normalised sum
-    /// of the face normals `(v1 - v0) × (v2 - v0)` (whose length is twice the
-    /// area) of the triangles that use it. A vertex that no triangle (or only
-    /// degenerate ones) uses, or whose faces cancel out, gets zero; the shading
-    /// then falls back to the face normal. Indices must be valid.
-    pub fn smooth_normals(&self) -> Vec<Vec3> {
-        let mut normals = vec![Vec3::ZERO; self.positions.len()];
-        for (index, triangle) in self.triangles.iter().enumerate() {
-            let normal = self.face_normal(index);
+    /// Gives a mesh without normals smooth vertex normals that keep its sharp
+    /// edges: each triangle corner averages (area-weighted) the faces around its
+    /// vertex whose normals are within `crease` radians of its own face, and a
+    /// vertex whose corners disagree is split into one vertex per normal (same
+    /// position and scalar). Triangles keep their order and their positions.
+    pub fn add_crease_normals(&mut self, crease: f32) {
+        let faces: Vec<Vec3> = (0..self.triangles.len())
+            .map(|t| self.face_normal(t))
+            .collect();
+        let units: Vec<Vec3> = faces.iter().map(|n| n.normalize_or_zero()).collect();
+        let cos_crease = crease.cos();
+        // The corners around each vertex, as (triangle, corner) pairs in CSR form.
+        let mut starts = vec![0usize; self.positions.len() + 1];
+        for triangle in &self.triangles {
             for &vertex in triangle {
-                normals[vertex as usize] += normal;
+                starts[vertex as usize + 1] += 1;
             }
         }
-        for normal in &mut normals {
-            *normal = normal.normalize_or_zero();
+        for i in 0..self.positions.len() {
+            starts[i + 1] += starts[i];
         }
-        normals
+        let mut fill = starts.clone();
+        let mut corners = vec![(0u32, 0u8); starts[self.positions.len()]];
+        for (t, triangle) in self.triangles.iter().enumerate() {
+            for (c, &vertex) in triangle.iter().enumerate() {
+                corners[fill[vertex as usize]] = (t as u32, c as u8);
+                fill[vertex as usize] += 1;
+            }
+        }
+        let mut positions = Vec::with_capacity(self.positions.len());
+        let mut scalars = self
+            .scalars
+            .as_ref()
+            .map(|_| Vec::with_capacity(self.positions.len()));
+        let mut normals = Vec::with_capacity(self.positions.len());
+        let mut triangles = self.triangles.clone();
+        for vertex in 0..self.positions.len() {
+            let around = &corners[starts[vertex]..starts[vertex + 1]];
+            let first_new = normals.len();
+            for &(t, c) in around {
+                let own = units[t as usize];
+                let sum: Vec3 = around
+                    .iter()
+                    .map(|&(u, _)| u as usize)
+                    .filter(|&u| units[u].dot(own) >= cos_crease)
+                    .map(|u| faces[u])
+                    .sum();
+                let normal = if sum == Vec3::ZERO {
+                    own
+                } else {
+                    sum.normalize_or_zero()
+                };
+                // Corners with the same normal share one vertex.
+                let index = match normals[first_new..]
+                    .iter()
+                    .position(|n: &Vec3| *n == normal)
+                {
+                    Some(found) => first_new + found,
+                    None => {
+                        positions.push(self.positions[vertex]);
+                        if let (Some(new), Some(old)) = (scalars.as_mut(), self.scalars.as_ref()) {
+                            new.push(old[vertex]);
+                        }
+                        normals.push(normal);
+                        normals.len() - 1
+                    }
+                };
+                triangles[t as usize][c as usize] = index as u32;
+            }
+        }
+        self.positions = positions;
+        self.scalars = scalars;
+        self.normals = Some(normals);
+        self.triangles = triangles;
     }
 }
 
@@ -195,29 +252,88 @@ mod tests {
         assert_eq!(mesh.face_normal(0), Vec3::Z);
     }
 
+    /// A unit cube of 8 shared vertices (12 triangles, outward winding).
+    fn cube() -> TriangleMesh {
+        let corner =
+            |i: u32| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32);
+        let mut triangles = Vec::new();
+        for [a, b, c, d] in [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ] {
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+        }
+        TriangleMesh {
+            positions: (0..8).map(corner).collect(),
+            triangles,
+            normals: None,
+            scalars: Some((0..8).map(|i| i as f32).collect()),
+        }
+    }
+
     #[test]
-    fn smooth_normals_are_area_weighted() {
-        // A big triangle in z = 0 and a small one in x = 0 sharing the edge 0-1.
-        let mesh = TriangleMesh {
+    fn crease_normals_keep_a_cubes_edges_sharp() {
+        let mut mesh = cube();
+        let before = mesh.clone();
+        mesh.add_crease_normals(60f32.to_radians());
+        // Each corner of the cube becomes three vertices, one per face.
+        assert_eq!(mesh.positions.len(), 24);
+        let normals = mesh.normals.as_ref().unwrap();
+        for (t, triangle) in mesh.triangles.iter().enumerate() {
+            let face = mesh.face_normal(t).normalize();
+            for &v in triangle {
+                assert!(
+                    (normals[v as usize] - face).length() < 1e-6,
+                    "a flat face has its own normal"
+                );
+            }
+            // Same triangles in the same order, at the same positions, with the same scalars.
+            for (&old, &new) in before.triangles[t].iter().zip(triangle) {
+                let (old, new) = (old as usize, new as usize);
+                assert_eq!(mesh.positions[new], before.positions[old]);
+                assert_eq!(
+                    mesh.scalars.as_ref().unwrap()[new],
+                    before.scalars.as_ref().unwrap()[old]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn crease_normals_leave_gentle_bends_smooth() {
+        // Two triangles folded by 20 degrees along their shared edge: one normal per
+        // vertex, weighted by area (the first triangle is 4 times the second).
+        let bend = 20f32.to_radians();
+        let mut mesh = TriangleMesh {
             positions: vec![
                 Vec3::ZERO,
                 Vec3::Y,
-                Vec3::new(4.0, 0.0, 0.0),
-                Vec3::new(0.0, 0.0, 1.0),
-                Vec3::splat(9.0),
+                4.0 * Vec3::X,
+                Vec3::new(-bend.cos(), 0.0, bend.sin()),
             ],
             triangles: vec![[0, 2, 1], [0, 1, 3]],
             normals: None,
             scalars: None,
         };
-        let normals = mesh.smooth_normals();
-        // Faces: +z with area 2 (weight 4), +x with area 0.5 (weight 1).
-        let shared = Vec3::new(1.0, 0.0, 4.0).normalize();
-        assert!((normals[0] - shared).length() < 1e-6);
-        assert!((normals[1] - shared).length() < 1e-6);
-        assert_eq!(normals[2], Vec3::Z);
-        assert_eq!(normals[3], Vec3::X);
-        assert_eq!(normals[4], Vec3::ZERO);
+        let faces = [
+            mesh.face_normal(0).normalize(),
+            mesh.face_normal(1).normalize(),
+        ];
+        mesh.add_crease_normals(60f32.to_radians());
+        assert_eq!(mesh.positions.len(), 4);
+        let normals = mesh.normals.clone().unwrap();
+        assert!((normals[0] - normals[1]).length() < 1e-6);
+        let expected = (4.0 * faces[0] + faces[1]).normalize();
+        assert!(
+            (normals[0] - expected).length() < 1e-6,
+            "{} vs {expected}",
+            normals[0]
+        );
     }
 
     #[test]

@@ -23,12 +23,17 @@ pub enum SceneError {
     Materials(String),
 }
 
+/// Faces meeting at more than this angle keep a sharp edge between them when
+/// normals are computed at load (a cube's edges; not an isosurface's bumps).
+pub const CREASE_ANGLE_DEGREES: f32 = 60.0;
+
 /// A validated mesh with its BVH and material table.
 #[derive(Clone, Debug)]
 pub struct TraceScene {
     /// The mesh, with `normals` and `scalars` always present: when the input has
-    /// none, smooth area-weighted vertex normals ([`TriangleMesh::smooth_normals`])
-    /// and the vertices' y coordinates.
+    /// none, smooth area-weighted vertex normals that keep edges sharper than
+    /// [`CREASE_ANGLE_DEGREES`] ([`TriangleMesh::add_crease_normals`]), and the
+    /// vertices' y coordinates.
     pub mesh: TriangleMesh,
     pub bvh: Bvh,
     pub bounds: Bounds,
@@ -55,7 +60,7 @@ impl TraceScene {
             .validate(mesh.triangles.len())
             .map_err(SceneError::Materials)?;
         if mesh.normals.is_none() {
-            mesh.normals = Some(mesh.smooth_normals());
+            mesh.add_crease_normals(CREASE_ANGLE_DEGREES.to_radians());
         }
         if mesh.scalars.is_none() {
             mesh.scalars = Some(mesh.positions.iter().map(|p: &Vec3| p.y).collect());
