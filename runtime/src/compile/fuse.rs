@@ -354,8 +354,7 @@ impl StageFormer<'_> {
     /// The finished stage, then views of record fields it computed that later
     /// nodes read (the record itself is materialised instead of the field).
     fn close(&self, stage: OpenStage, barrier: Barrier) -> Vec<Node> {
-        let mut reads_in_stage = vec![0u32; 0];
-        reads_in_stage.resize(self.vars.len(), 0);
+        let mut reads_in_stage = vec![0u32; self.vars.len()];
         for op in &stage.ops {
             let mut distinct = op.array_reads();
             for e in op.host_exprs() {

@@ -238,11 +238,8 @@ impl Lowerer<'_, '_> {
                     },
                 };
                 if let Some(var) = var {
-                    if self.outputs.contains(&name.name) {
-                        if self.fn_stack.is_empty() {
-                            // Re-declaring in another branch is fine; it names the same output.
-                        }
-                    } else {
+                    // `out x` in several branches names one output.
+                    if !self.outputs.contains(&name.name) {
                         self.outputs.push(name.name.clone());
                     }
                     out.push(Node::Output {
