@@ -6,6 +6,7 @@
 use crate::column::{Column, ColumnView};
 use crate::host::{HostValue, UniformSchema, Uniforms};
 use crate::types::{ElemType, HostType, RecordRegistry};
+use crate::wgsl::{WgslRequest, WgslTwin};
 use std::any::Any;
 use std::collections::BTreeMap;
 use std::fmt;
@@ -217,6 +218,12 @@ pub trait Functor: Send + Sync {
         inputs: &[ColumnView<'_>],
         outputs: &mut [Column],
     ) -> Result<(), FunctorError>;
+
+    /// The functor's WGSL twin for the GPU backend (conventions in [`crate::wgsl`]).
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let _ = request;
+        Err(crate::wgsl::no_twin(self.signature().name))
+    }
 }
 
 /// Every functor, record type and uniform a pipeline may name.

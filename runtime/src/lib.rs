@@ -17,6 +17,7 @@ pub mod compile;
 pub mod cpu;
 pub mod generic;
 pub mod host_eval;
+pub mod wgsl;
 
 pub use compile::ir::Plan;
 pub use compile::{compile_file, compile_text, CompileFailure, CompileOptions};
