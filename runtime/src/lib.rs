@@ -17,6 +17,7 @@ pub mod compile;
 pub mod cpu;
 pub mod generic;
 pub mod host_eval;
+pub mod interpret;
 pub mod wgsl;
 
 pub use compile::ir::Plan;

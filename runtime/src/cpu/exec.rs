@@ -7,18 +7,15 @@ use super::kernels::{self, Element, ScanTotal};
 use crate::column::{Column, ColumnView};
 use crate::compile::ir::*;
 use crate::functor::{CallContext, FunctorLibrary};
-use crate::host::{HostValue, Uniforms};
-use crate::host_eval::{eval_host, HostEnvironment};
+use crate::host::Uniforms;
+use crate::interpret::{
+    elementwise_materialised, error, interpret, is_sink, Backend, OpHostValues, Slots, StageCall,
+};
 use crate::types::ElemType;
 use std::any::Any;
 use std::ops::Range;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
-
-/// Longest array a stage may make: keeps `u32` indices valid and memory sane.
-pub const MAX_ELEMENTS: usize = 1 << 31;
-/// A `while` loop that runs this often is taken to be stuck.
-pub const MAX_WHILE_ITERATIONS: u64 = 10_000_000;
+use std::time::Duration;
 
 pub struct RunContext<'a> {
     pub library: &'a FunctorLibrary,
@@ -29,105 +26,52 @@ pub struct RunContext<'a> {
     pub chunk: usize,
 }
 
-#[derive(Clone, Debug, PartialEq)]
-pub enum OutputValue {
-    Array(Arc<Column>),
-    Host(HostValue),
-}
+pub use crate::interpret::{
+    OutputValue, RunError, RunResult, StageTiming, MAX_ELEMENTS, MAX_WHILE_ITERATIONS,
+};
 
-/// Time spent in one stage of the plan over the whole run.
-#[derive(Clone, Debug)]
-pub struct StageTiming {
-    /// 1-based, as numbered by `dpp plan`.
-    pub stage: usize,
-    pub label: String,
-    pub runs: u32,
-    pub elements: u64,
-    pub time: Duration,
-}
-
-#[derive(Clone, Debug)]
-pub struct RunResult {
-    /// In the order of the pipeline's `out` declarations.
-    pub outputs: Vec<(String, OutputValue)>,
-    pub profile: Vec<StageTiming>,
-}
-
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{message}")]
-pub struct RunError {
-    pub message: String,
-}
-
-fn error(message: impl Into<String>) -> RunError {
-    RunError {
-        message: message.into(),
-    }
-}
-
+/// Runs `plan` on the CPU.
 pub fn run_plan(plan: &Plan, context: &RunContext<'_>) -> Result<RunResult, RunError> {
-    let stages = plan.stages();
-    let mut executor = Executor {
+    let mut backend = CpuBackend { context };
+    interpret(
         plan,
-        context,
-        arrays: vec![None; plan.vars.len()],
-        hosts: vec![None; plan.vars.len()],
-        outputs: Vec::new(),
-        profile: stages
-            .iter()
-            .enumerate()
-            .map(|(i, s)| StageTiming {
-                stage: i + 1,
-                label: s.label(),
-                runs: 0,
-                elements: 0,
-                time: Duration::ZERO,
-            })
-            .collect(),
-        stages,
-    };
-    executor.nodes(&plan.body)?;
-    let mut outputs = Vec::new();
-    for name in &plan.outputs {
-        match executor.outputs.iter().rev().find(|(n, _)| n == name) {
-            Some(found) => outputs.push(found.clone()),
-            None => {
-                return Err(error(format!(
-                    "output `{name}` was never written (its `out` did not run)"
-                )))
-            }
-        }
-    }
-    Ok(RunResult {
-        outputs,
-        profile: executor.profile,
-    })
+        &mut backend,
+        context.uniforms,
+        &context.library.records,
+    )
 }
 
-enum Flow {
-    Continue,
-    Break,
-}
-
-struct Executor<'a> {
-    plan: &'a Plan,
+struct CpuBackend<'a> {
     context: &'a RunContext<'a>,
-    arrays: Vec<Option<Arc<Column>>>,
-    hosts: Vec<Option<HostValue>>,
-    outputs: Vec<(String, OutputValue)>,
-    profile: Vec<StageTiming>,
-    stages: Vec<&'a Stage>,
 }
 
-impl HostEnvironment for Executor<'_> {
-    fn host_var(&self, var: VarId) -> Option<HostValue> {
-        self.hosts[var.0 as usize]
+impl Backend for CpuBackend<'_> {
+    type Array = Arc<Column>;
+
+    fn len(array: &Arc<Column>) -> usize {
+        array.len()
     }
-    fn array_len(&self, var: VarId) -> Option<usize> {
-        self.arrays[var.0 as usize].as_ref().map(|a| a.len())
+
+    fn field(&self, array: &Arc<Column>, index: usize) -> Option<Arc<Column>> {
+        array.field(index)
     }
-    fn uniforms(&self) -> &Uniforms {
-        self.context.uniforms
+
+    fn run_stage(
+        &mut self,
+        call: &StageCall<'_>,
+        slots: &mut Slots<Arc<Column>>,
+    ) -> Result<Option<Duration>, RunError> {
+        StageRun {
+            call,
+            context: self.context,
+            slots,
+        }
+        .run()?;
+        Ok(None)
+    }
+
+    fn to_column(&mut self, array: &Arc<Column>) -> Result<Arc<Column>, RunError> {
+        Ok(array.clone())
     }
 }
 
@@ -146,15 +90,6 @@ impl ChunkValue {
             ChunkValue::Whole(c) => c.slice(range.clone()),
         }
     }
-}
-
-/// Host values an op needs, evaluated once when its stage starts.
-struct OpHostValues {
-    named: Vec<HostValue>,
-    /// `k` of a group gather or fan-out.
-    group: usize,
-    /// `fill`'s value.
-    fill: Option<HostValue>,
 }
 
 /// What one chunk hands back to the stage.
@@ -180,217 +115,28 @@ enum SinkPart {
     },
 }
 
-impl<'a> Executor<'a> {
-    fn eval(&self, expr: &HostExpr) -> Result<HostValue, RunError> {
-        eval_host(expr, self).map_err(error)
-    }
+/// One stage running on the CPU.
+struct StageRun<'s, 'a> {
+    call: &'s StageCall<'s>,
+    context: &'a RunContext<'a>,
+    slots: &'s mut Slots<Arc<Column>>,
+}
 
-    fn eval_count(&self, expr: &HostExpr, what: &str) -> Result<usize, RunError> {
-        let value = self.eval(expr)?;
-        match value.as_int() {
-            Some(n) if n >= 0 && (n as u64) <= MAX_ELEMENTS as u64 => Ok(n as usize),
-            Some(n) if n < 0 => Err(error(format!("{what} is negative ({n})"))),
-            Some(n) => Err(error(format!(
-                "{what} is {n}, above the limit of {MAX_ELEMENTS} elements"
-            ))),
-            None => Err(error(format!("{what} must be an integer, found {value}"))),
-        }
-    }
-
+impl StageRun<'_, '_> {
     fn array(&self, var: VarId) -> Result<&Arc<Column>, RunError> {
-        self.arrays[var.0 as usize].as_ref().ok_or_else(|| {
-            error(format!(
-                "`{}` is read before it has a value",
-                self.plan.var(var).name
-            ))
-        })
-    }
-
-    fn nodes(&mut self, nodes: &'a [Node]) -> Result<Flow, RunError> {
-        for node in nodes {
-            match node {
-                Node::Stage(stage) => {
-                    let number = self
-                        .stages
-                        .iter()
-                        .position(|s| std::ptr::eq(*s, stage))
-                        .expect("every stage is in the plan");
-                    let start = Instant::now();
-                    let elements = self.stage(stage).map_err(|e| {
-                        error(format!(
-                            "stage {} [{}]: {}",
-                            number + 1,
-                            self.profile[number].label,
-                            e.message
-                        ))
-                    })?;
-                    let timing = &mut self.profile[number];
-                    timing.runs += 1;
-                    timing.elements += elements as u64;
-                    timing.time += start.elapsed();
-                }
-                Node::Op(_) => unreachable!("plans hand backends stages, never bare ops"),
-                Node::Host { dst, expr, .. } => {
-                    let value = self.eval(expr)?;
-                    self.hosts[dst.0 as usize] = Some(value);
-                }
-                Node::View { dst, src, field } => {
-                    let column = self.array(*src)?;
-                    let view = match column.as_ref() {
-                        Column::Record { ty, .. } => self
-                            .context
-                            .library
-                            .records
-                            .get(*ty)
-                            .field_index(field)
-                            .and_then(|i| column.field(i)),
-                        _ => None,
-                    };
-                    let view = view.ok_or_else(|| {
-                        error(format!(
-                            "`{}` has no field `{field}`",
-                            self.plan.var(*src).name
-                        ))
-                    })?;
-                    self.arrays[dst.0 as usize] = Some(view);
-                }
-                Node::Alias { dst, src } => {
-                    let value = self.array(*src)?.clone();
-                    self.arrays[dst.0 as usize] = Some(value);
-                }
-                Node::For {
-                    var,
-                    start,
-                    end,
-                    body,
-                    ..
-                } => {
-                    let (start, end) = (self.eval(start)?, self.eval(end)?);
-                    let (Some(start), Some(end)) = (start.as_int(), end.as_int()) else {
-                        return Err(error("loop bounds must be integers"));
-                    };
-                    for i in start..end {
-                        self.hosts[var.0 as usize] = Some(HostValue::Int(i));
-                        if let Flow::Break = self.nodes(body)? {
-                            break;
-                        }
-                    }
-                }
-                Node::While { cond, body, .. } => {
-                    let mut iterations = 0u64;
-                    while self.eval(cond)?.as_bool() == Some(true) {
-                        iterations += 1;
-                        if iterations > MAX_WHILE_ITERATIONS {
-                            return Err(error(format!(
-                                "a `while` loop ran {MAX_WHILE_ITERATIONS} times; stopping (is its condition ever false?)"
-                            )));
-                        }
-                        if let Flow::Break = self.nodes(body)? {
-                            break;
-                        }
-                    }
-                }
-                Node::If {
-                    cond,
-                    then_body,
-                    else_body,
-                    ..
-                } => {
-                    let branch = if self.eval(cond)?.as_bool() == Some(true) {
-                        then_body
-                    } else {
-                        else_body
-                    };
-                    if let Flow::Break = self.nodes(branch)? {
-                        return Ok(Flow::Break);
-                    }
-                }
-                Node::Break => return Ok(Flow::Break),
-                Node::Output { name, var } => {
-                    let value = match self.plan.var(*var).ty {
-                        VarType::Host(_) => OutputValue::Host(
-                            self.hosts[var.0 as usize]
-                                .ok_or_else(|| error(format!("output `{name}` has no value")))?,
-                        ),
-                        _ => OutputValue::Array(self.array(*var)?.clone()),
-                    };
-                    self.outputs.push((name.clone(), value));
-                }
-            }
-        }
-        Ok(Flow::Continue)
+        self.slots.array(self.call.plan, var)
     }
 
     fn elem_type(&self, var: VarId) -> ElemType {
-        match self.plan.var(var).ty {
-            VarType::Array(t) => t,
-            other => unreachable!("array variable of type {other:?} after type checking"),
-        }
+        self.call.elem_type(var)
     }
 
-    /// Runs one stage; returns the number of elements it ran over.
-    fn stage(&mut self, stage: &'a Stage) -> Result<usize, RunError> {
+    fn run(&mut self) -> Result<(), RunError> {
+        let stage = self.call.stage;
         let head = &stage.ops[0];
-        let mut host_values = Vec::with_capacity(stage.ops.len());
-        for op in &stage.ops {
-            let named = op
-                .named
-                .iter()
-                .map(|(_, e)| self.eval(e))
-                .collect::<Result<Vec<_>, _>>()?;
-            let group = match &op.kind {
-                OpKind::GroupGather { group: k } | OpKind::Expand { fanout: k } => {
-                    let k = self.eval_count(k, "the group size")?;
-                    if k == 0 {
-                        return Err(error("a group or fan-out of 0 elements"));
-                    }
-                    k
-                }
-                _ => 1,
-            };
-            let fill = match &op.kind {
-                OpKind::Fill { value, .. } => Some(self.eval(value)?),
-                _ => None,
-            };
-            host_values.push(OpHostValues { named, group, fill });
-        }
-
-        // The head op decides how many elements the stage runs over.
+        let host_values = &self.call.host_values;
+        let len = self.call.len;
         let k = host_values[0].group;
-        let len = match &head.kind {
-            OpKind::Iota { count } | OpKind::Fill { count, .. } => {
-                self.eval_count(count, "the length")?
-            }
-            OpKind::GroupGather { .. } => {
-                let src = self.array(head.inputs[0])?.len();
-                if src % k != 0 {
-                    return Err(error(format!("group gather of {src} elements in groups of {k}: {src} is not a multiple of {k}")));
-                }
-                src / k
-            }
-            OpKind::Expand { .. } => {
-                let n = self
-                    .array(head.inputs[0])?
-                    .len()
-                    .checked_mul(k)
-                    .filter(|n| *n <= MAX_ELEMENTS);
-                n.ok_or_else(|| {
-                    error(format!(
-                        "fan-out by {k} makes more than {MAX_ELEMENTS} elements"
-                    ))
-                })?
-            }
-            _ => self.array(head.inputs[0])?.len(),
-        };
-        for &v in &stage.reads_direct {
-            let found = self.array(v)?.len();
-            if found != len {
-                return Err(error(format!(
-                    "length mismatch: `{}` has {found} elements, but the stage runs over {len}",
-                    self.plan.var(v).name
-                )));
-            }
-        }
         // Chunks hold whole groups of a fan-out so each source element is in one chunk.
         let chunk = match head.kind {
             OpKind::Expand { .. } => (self.context.chunk / k).max(1) * k,
@@ -399,27 +145,33 @@ impl<'a> Executor<'a> {
         };
 
         let results = kernels::run_chunked(len, chunk, |range| {
-            self.run_chunk(stage, &host_values, range)
+            self.run_chunk(stage, host_values, range)
         })
         .into_iter()
         .collect::<Result<Vec<_>, RunError>>()?;
 
         // Materialised values: the chunks joined in order.
-        for (position, var) in chunk_materialised(stage).into_iter().enumerate() {
+        for (position, var) in elementwise_materialised(stage).into_iter().enumerate() {
             let parts: Vec<Column> = results
                 .iter()
                 .map(|r| Arc::unwrap_or_clone(r.materialised[position].clone()))
                 .collect();
             let column = Column::concat(self.elem_type(var), &parts, &self.context.library.records);
-            self.arrays[var.0 as usize] = Some(Arc::new(column));
+            self.slots.set_array(var, Arc::new(column));
         }
         if let Some(op) = stage.ops.last().filter(|op| is_sink(op)) {
-            self.finish_sink(op, results)?;
+            let sink_values = &host_values[stage.ops.len() - 1];
+            self.finish_sink(op, sink_values, results)?;
         }
-        Ok(len)
+        Ok(())
     }
 
-    fn finish_sink(&mut self, op: &Op, results: Vec<ChunkResult>) -> Result<(), RunError> {
+    fn finish_sink(
+        &mut self,
+        op: &Op,
+        values: &OpHostValues,
+        results: Vec<ChunkResult>,
+    ) -> Result<(), RunError> {
         let records = &self.context.library.records;
         let kernel_error = |e: kernels::KernelError| error(e.to_string());
         match &op.kind {
@@ -428,8 +180,8 @@ impl<'a> Executor<'a> {
             } => {
                 let ty = self.elem_type(op.outputs[0]);
                 let mut dst = match target {
-                    ScatterTarget::Len(len) => {
-                        Column::zeroed(ty, self.eval_count(len, "the scatter length")?, records)
+                    ScatterTarget::Len(_) => {
+                        Column::zeroed(ty, values.scatter_len.unwrap_or_default(), records)
                     }
                     ScatterTarget::Into(dst) => Arc::unwrap_or_clone(self.array(*dst)?.clone()),
                 };
@@ -455,7 +207,7 @@ impl<'a> Executor<'a> {
                     }
                     .map_err(kernel_error)?;
                 }
-                self.arrays[op.outputs[0].0 as usize] = Some(Arc::new(dst));
+                self.slots.set_array(op.outputs[0], Arc::new(dst));
             }
             OpKind::Reduce { op: monoid } => {
                 let partials: Vec<Element> = results
@@ -468,7 +220,7 @@ impl<'a> Executor<'a> {
                 let ty = self.elem_type(op.inputs[0]);
                 let value =
                     kernels::reduce_to_host(*monoid, ty, &partials).map_err(kernel_error)?;
-                self.hosts[op.outputs[0].0 as usize] = Some(value);
+                self.slots.set_host(op.outputs[0], value);
             }
             OpKind::Scan {
                 op: monoid,
@@ -504,8 +256,8 @@ impl<'a> Executor<'a> {
                     })
                     .collect::<Result<Vec<Column>, _>>()
                     .map_err(kernel_error)?;
-                self.arrays[op.outputs[0].0 as usize] =
-                    Some(Arc::new(Column::concat(ty, &parts, records)));
+                self.slots
+                    .set_array(op.outputs[0], Arc::new(Column::concat(ty, &parts, records)));
             }
             _ => unreachable!("only scatter, reduce and scan are sinks"),
         }
@@ -665,7 +417,7 @@ impl<'a> Executor<'a> {
             }
         }
         let mut materialised = Vec::new();
-        for var in chunk_materialised(stage) {
+        for var in elementwise_materialised(stage) {
             let value = lookup(&locals, var)?;
             materialised.push(match value {
                 ChunkValue::Chunk(c) => c,
@@ -686,27 +438,4 @@ impl<'a> Executor<'a> {
             .get(name)
             .ok_or_else(|| error(format!("functor `{name}` is not in this run's library")))
     }
-}
-
-fn is_sink(op: &Op) -> bool {
-    matches!(
-        op.kind,
-        OpKind::Scatter { .. } | OpKind::Reduce { .. } | OpKind::Scan { .. }
-    )
-}
-
-/// The variables each chunk hands back: everything the stage materialises but
-/// a sink's result, which the sink assembles itself.
-fn chunk_materialised(stage: &Stage) -> Vec<VarId> {
-    let sink_output = stage
-        .ops
-        .last()
-        .filter(|op| is_sink(op))
-        .map(|op| op.outputs[0]);
-    stage
-        .materialises
-        .iter()
-        .copied()
-        .filter(|v| Some(*v) != sink_output)
-        .collect()
 }

@@ -1,0 +1,477 @@
+//! What every backend shares: walking a plan's nodes in order (host bindings,
+//! views, loops, branches, outputs), evaluating the host values a stage needs
+//! and deciding how many elements it runs over. A backend supplies only its
+//! array storage and how one stage runs ([`Backend`]), so the CPU and GPU
+//! backends cannot disagree about control flow.
+
+use crate::column::Column;
+use crate::compile::ir::*;
+use crate::host::{HostValue, Uniforms};
+use crate::host_eval::{eval_host, HostEnvironment};
+use crate::types::{ElemType, RecordRegistry};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// Longest array a stage may make: keeps `u32` indices valid and memory sane.
+pub const MAX_ELEMENTS: usize = 1 << 31;
+/// A `while` loop that runs this often is taken to be stuck.
+pub const MAX_WHILE_ITERATIONS: u64 = 10_000_000;
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum OutputValue {
+    Array(Arc<Column>),
+    Host(HostValue),
+}
+
+/// Time spent in one stage of the plan over the whole run.
+#[derive(Clone, Debug)]
+pub struct StageTiming {
+    /// 1-based, as numbered by `dpp plan`.
+    pub stage: usize,
+    pub label: String,
+    pub runs: u32,
+    pub elements: u64,
+    /// Wall time on the host (the CPU backend), or device time where the GPU
+    /// backend measured it with timestamp queries.
+    pub time: Duration,
+}
+
+#[derive(Clone, Debug)]
+pub struct RunResult {
+    /// In the order of the pipeline's `out` declarations.
+    pub outputs: Vec<(String, OutputValue)>,
+    pub profile: Vec<StageTiming>,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{message}")]
+pub struct RunError {
+    pub message: String,
+}
+
+pub fn error(message: impl Into<String>) -> RunError {
+    RunError {
+        message: message.into(),
+    }
+}
+
+/// Host values an op needs, evaluated once when its stage starts.
+pub struct OpHostValues {
+    /// Named arguments in signature order.
+    pub named: Vec<HostValue>,
+    /// `k` of a group gather or fan-out; 1 otherwise.
+    pub group: usize,
+    /// `fill`'s value.
+    pub fill: Option<HostValue>,
+    /// A scatter's `len:` target length.
+    pub scatter_len: Option<usize>,
+}
+
+/// The variables of a running plan: arrays in the backend's storage, host scalars.
+pub struct Slots<A> {
+    pub arrays: Vec<Option<A>>,
+    pub hosts: Vec<Option<HostValue>>,
+}
+
+impl<A> Slots<A> {
+    pub fn array(&self, plan: &Plan, var: VarId) -> Result<&A, RunError> {
+        self.arrays[var.0 as usize].as_ref().ok_or_else(|| {
+            error(format!(
+                "`{}` is read before it has a value",
+                plan.var(var).name
+            ))
+        })
+    }
+
+    pub fn set_array(&mut self, var: VarId, value: A) {
+        self.arrays[var.0 as usize] = Some(value);
+    }
+
+    pub fn set_host(&mut self, var: VarId, value: HostValue) {
+        self.hosts[var.0 as usize] = Some(value);
+    }
+}
+
+/// One stage, ready to run: its host values and length already known.
+pub struct StageCall<'a> {
+    pub plan: &'a Plan,
+    pub stage: &'a Stage,
+    /// One per op of the stage.
+    pub host_values: Vec<OpHostValues>,
+    /// The number of elements the stage runs over.
+    pub len: usize,
+    pub uniforms: &'a Uniforms,
+    pub records: &'a RecordRegistry,
+}
+
+impl StageCall<'_> {
+    pub fn elem_type(&self, var: VarId) -> ElemType {
+        elem_type(self.plan, var)
+    }
+}
+
+/// The array element type of `var` (type checking guarantees one).
+pub fn elem_type(plan: &Plan, var: VarId) -> ElemType {
+    match plan.var(var).ty {
+        VarType::Array(t) => t,
+        other => unreachable!("array variable of type {other:?} after type checking"),
+    }
+}
+
+/// How a backend stores arrays and runs one stage.
+pub trait Backend {
+    type Array: Clone;
+
+    fn len(array: &Self::Array) -> usize;
+
+    /// A view of field `index` of a record array (no copy where the backend can help it).
+    fn field(&self, array: &Self::Array, index: usize) -> Option<Self::Array>;
+
+    /// Runs the stage, writing what it materialises (and a sink's result) into
+    /// `slots`. Returns the device time when the backend measured one itself.
+    fn run_stage(
+        &mut self,
+        call: &StageCall<'_>,
+        slots: &mut Slots<Self::Array>,
+    ) -> Result<Option<Duration>, RunError>;
+
+    /// The array as a host column, for the run's outputs.
+    fn to_column(&mut self, array: &Self::Array) -> Result<Arc<Column>, RunError>;
+}
+
+/// Runs `plan` on `backend`.
+pub fn interpret<B: Backend>(
+    plan: &Plan,
+    backend: &mut B,
+    uniforms: &Uniforms,
+    records: &RecordRegistry,
+) -> Result<RunResult, RunError> {
+    let stages = plan.stages();
+    let mut interpreter = Interpreter {
+        plan,
+        uniforms,
+        records,
+        backend,
+        slots: Slots {
+            arrays: vec![None; plan.vars.len()],
+            hosts: vec![None; plan.vars.len()],
+        },
+        outputs: Vec::new(),
+        profile: stages
+            .iter()
+            .enumerate()
+            .map(|(i, s)| StageTiming {
+                stage: i + 1,
+                label: s.label(),
+                runs: 0,
+                elements: 0,
+                time: Duration::ZERO,
+            })
+            .collect(),
+        stages,
+    };
+    interpreter.nodes(&plan.body)?;
+    let mut outputs = Vec::new();
+    for name in &plan.outputs {
+        match interpreter.outputs.iter().rev().find(|(n, _)| n == name) {
+            Some(found) => outputs.push(found.clone()),
+            None => {
+                return Err(error(format!(
+                    "output `{name}` was never written (its `out` did not run)"
+                )))
+            }
+        }
+    }
+    Ok(RunResult {
+        outputs,
+        profile: interpreter.profile,
+    })
+}
+
+enum Flow {
+    Continue,
+    Break,
+}
+
+struct Interpreter<'a, B: Backend> {
+    plan: &'a Plan,
+    uniforms: &'a Uniforms,
+    records: &'a RecordRegistry,
+    backend: &'a mut B,
+    slots: Slots<B::Array>,
+    outputs: Vec<(String, OutputValue)>,
+    profile: Vec<StageTiming>,
+    stages: Vec<&'a Stage>,
+}
+
+struct Environment<'a, A: Clone, B: Backend<Array = A>> {
+    slots: &'a Slots<A>,
+    uniforms: &'a Uniforms,
+    backend: std::marker::PhantomData<B>,
+}
+
+impl<A: Clone, B: Backend<Array = A>> HostEnvironment for Environment<'_, A, B> {
+    fn host_var(&self, var: VarId) -> Option<HostValue> {
+        self.slots.hosts[var.0 as usize]
+    }
+    fn array_len(&self, var: VarId) -> Option<usize> {
+        self.slots.arrays[var.0 as usize].as_ref().map(B::len)
+    }
+    fn uniforms(&self) -> &Uniforms {
+        self.uniforms
+    }
+}
+
+impl<'a, B: Backend> Interpreter<'a, B> {
+    fn eval(&self, expr: &HostExpr) -> Result<HostValue, RunError> {
+        let environment = Environment::<B::Array, B> {
+            slots: &self.slots,
+            uniforms: self.uniforms,
+            backend: std::marker::PhantomData,
+        };
+        eval_host(expr, &environment).map_err(error)
+    }
+
+    fn eval_count(&self, expr: &HostExpr, what: &str) -> Result<usize, RunError> {
+        let value = self.eval(expr)?;
+        match value.as_int() {
+            Some(n) if n >= 0 && (n as u64) <= MAX_ELEMENTS as u64 => Ok(n as usize),
+            Some(n) if n < 0 => Err(error(format!("{what} is negative ({n})"))),
+            Some(n) => Err(error(format!(
+                "{what} is {n}, above the limit of {MAX_ELEMENTS} elements"
+            ))),
+            None => Err(error(format!("{what} must be an integer, found {value}"))),
+        }
+    }
+
+    fn array_len(&self, var: VarId) -> Result<usize, RunError> {
+        Ok(B::len(self.slots.array(self.plan, var)?))
+    }
+
+    fn nodes(&mut self, nodes: &'a [Node]) -> Result<Flow, RunError> {
+        for node in nodes {
+            match node {
+                Node::Stage(stage) => {
+                    let number = self
+                        .stages
+                        .iter()
+                        .position(|s| std::ptr::eq(*s, stage))
+                        .expect("every stage is in the plan");
+                    let start = Instant::now();
+                    let (elements, device_time) = self.stage(stage).map_err(|e| {
+                        error(format!(
+                            "stage {} [{}]: {}",
+                            number + 1,
+                            self.profile[number].label,
+                            e.message
+                        ))
+                    })?;
+                    let timing = &mut self.profile[number];
+                    timing.runs += 1;
+                    timing.elements += elements as u64;
+                    timing.time += device_time.unwrap_or_else(|| start.elapsed());
+                }
+                Node::Op(_) => unreachable!("plans hand backends stages, never bare ops"),
+                Node::Host { dst, expr, .. } => {
+                    let value = self.eval(expr)?;
+                    self.slots.set_host(*dst, value);
+                }
+                Node::View { dst, src, field } => {
+                    let array = self.slots.array(self.plan, *src)?;
+                    let view = match elem_type(self.plan, *src) {
+                        ElemType::Record(ty) => self
+                            .records
+                            .get(ty)
+                            .field_index(field)
+                            .and_then(|i| self.backend.field(array, i)),
+                        _ => None,
+                    };
+                    let view = view.ok_or_else(|| {
+                        error(format!(
+                            "`{}` has no field `{field}`",
+                            self.plan.var(*src).name
+                        ))
+                    })?;
+                    self.slots.set_array(*dst, view);
+                }
+                Node::Alias { dst, src } => {
+                    let value = self.slots.array(self.plan, *src)?.clone();
+                    self.slots.set_array(*dst, value);
+                }
+                Node::For {
+                    var,
+                    start,
+                    end,
+                    body,
+                    ..
+                } => {
+                    let (start, end) = (self.eval(start)?, self.eval(end)?);
+                    let (Some(start), Some(end)) = (start.as_int(), end.as_int()) else {
+                        return Err(error("loop bounds must be integers"));
+                    };
+                    for i in start..end {
+                        self.slots.set_host(*var, HostValue::Int(i));
+                        if let Flow::Break = self.nodes(body)? {
+                            break;
+                        }
+                    }
+                }
+                Node::While { cond, body, .. } => {
+                    let mut iterations = 0u64;
+                    while self.eval(cond)?.as_bool() == Some(true) {
+                        iterations += 1;
+                        if iterations > MAX_WHILE_ITERATIONS {
+                            return Err(error(format!(
+                                "a `while` loop ran {MAX_WHILE_ITERATIONS} times; stopping (is its condition ever false?)"
+                            )));
+                        }
+                        if let Flow::Break = self.nodes(body)? {
+                            break;
+                        }
+                    }
+                }
+                Node::If {
+                    cond,
+                    then_body,
+                    else_body,
+                    ..
+                } => {
+                    let branch = if self.eval(cond)?.as_bool() == Some(true) {
+                        then_body
+                    } else {
+                        else_body
+                    };
+                    if let Flow::Break = self.nodes(branch)? {
+                        return Ok(Flow::Break);
+                    }
+                }
+                Node::Break => return Ok(Flow::Break),
+                Node::Output { name, var } => {
+                    let value = match self.plan.var(*var).ty {
+                        VarType::Host(_) => OutputValue::Host(
+                            self.slots.hosts[var.0 as usize]
+                                .ok_or_else(|| error(format!("output `{name}` has no value")))?,
+                        ),
+                        _ => {
+                            let array = self.slots.array(self.plan, *var)?.clone();
+                            OutputValue::Array(self.backend.to_column(&array)?)
+                        }
+                    };
+                    self.outputs.push((name.clone(), value));
+                }
+            }
+        }
+        Ok(Flow::Continue)
+    }
+
+    /// Runs one stage; returns the number of elements it ran over and the
+    /// backend's own measure of its time, if any.
+    fn stage(&mut self, stage: &'a Stage) -> Result<(usize, Option<Duration>), RunError> {
+        let head = &stage.ops[0];
+        let mut host_values = Vec::with_capacity(stage.ops.len());
+        for op in &stage.ops {
+            let named = op
+                .named
+                .iter()
+                .map(|(_, e)| self.eval(e))
+                .collect::<Result<Vec<_>, _>>()?;
+            let group = match &op.kind {
+                OpKind::GroupGather { group: k } | OpKind::Expand { fanout: k } => {
+                    let k = self.eval_count(k, "the group size")?;
+                    if k == 0 {
+                        return Err(error("a group or fan-out of 0 elements"));
+                    }
+                    k
+                }
+                _ => 1,
+            };
+            let fill = match &op.kind {
+                OpKind::Fill { value, .. } => Some(self.eval(value)?),
+                _ => None,
+            };
+            let scatter_len = match &op.kind {
+                OpKind::Scatter {
+                    target: ScatterTarget::Len(len),
+                    ..
+                } => Some(self.eval_count(len, "the scatter length")?),
+                _ => None,
+            };
+            host_values.push(OpHostValues {
+                named,
+                group,
+                fill,
+                scatter_len,
+            });
+        }
+
+        // The head op decides how many elements the stage runs over.
+        let k = host_values[0].group;
+        let len = match &head.kind {
+            OpKind::Iota { count } | OpKind::Fill { count, .. } => {
+                self.eval_count(count, "the length")?
+            }
+            OpKind::GroupGather { .. } => {
+                let src = self.array_len(head.inputs[0])?;
+                if src % k != 0 {
+                    return Err(error(format!("group gather of {src} elements in groups of {k}: {src} is not a multiple of {k}")));
+                }
+                src / k
+            }
+            OpKind::Expand { .. } => {
+                let n = self
+                    .array_len(head.inputs[0])?
+                    .checked_mul(k)
+                    .filter(|n| *n <= MAX_ELEMENTS);
+                n.ok_or_else(|| {
+                    error(format!(
+                        "fan-out by {k} makes more than {MAX_ELEMENTS} elements"
+                    ))
+                })?
+            }
+            _ => self.array_len(head.inputs[0])?,
+        };
+        for &v in &stage.reads_direct {
+            let found = self.array_len(v)?;
+            if found != len {
+                return Err(error(format!(
+                    "length mismatch: `{}` has {found} elements, but the stage runs over {len}",
+                    self.plan.var(v).name
+                )));
+            }
+        }
+        let call = StageCall {
+            plan: self.plan,
+            stage,
+            host_values,
+            len,
+            uniforms: self.uniforms,
+            records: self.records,
+        };
+        let device_time = self.backend.run_stage(&call, &mut self.slots)?;
+        Ok((len, device_time))
+    }
+}
+
+/// Whether `op` ends its stage by combining all elements (scatter, reduce, scan).
+pub fn is_sink(op: &Op) -> bool {
+    matches!(
+        op.kind,
+        OpKind::Scatter { .. } | OpKind::Reduce { .. } | OpKind::Scan { .. }
+    )
+}
+
+/// The variables a stage writes element by element: everything it
+/// materialises but a sink's result, which the sink assembles itself.
+pub fn elementwise_materialised(stage: &Stage) -> Vec<VarId> {
+    let sink_output = stage
+        .ops
+        .last()
+        .filter(|op| is_sink(op))
+        .map(|op| op.outputs[0]);
+    stage
+        .materialises
+        .iter()
+        .copied()
+        .filter(|v| Some(*v) != sink_output)
+        .collect()
+}
