@@ -16,6 +16,7 @@ pub use types::{ElemType, HostType, RecordId, RecordRegistry, RecordType};
 pub mod compile;
 pub mod cpu;
 pub mod generic;
+pub mod gpu;
 pub mod host_eval;
 pub mod interpret;
 pub mod wgsl;

@@ -5,6 +5,8 @@
 mod common;
 
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
+use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
+use dpp_runtime::wgsl::{GpuBuffer, WgslRequest, WgslTwin};
 use dpp_runtime::*;
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
@@ -12,9 +14,38 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 
-/// The test's input columns, handed to the `…Data` functors as run resources.
+/// The test's input columns, handed to the `…Data` functors as run resources
+/// (and as words, for their GPU twin).
 struct Data {
     columns: Vec<Column>,
+    buffers: Vec<GpuBuffer>,
+}
+
+const DATA_NAMES: [&str; 10] = [
+    "data0", "data1", "data2", "data3", "data4", "data5", "data6", "data7", "data8", "data9",
+];
+
+impl Data {
+    fn new(columns: Vec<Column>) -> Data {
+        let buffers = columns
+            .iter()
+            .zip(DATA_NAMES)
+            .map(|(column, name)| {
+                let words: Vec<u32> = match column {
+                    Column::U32(v) => v.clone(),
+                    Column::F32(v) => v.iter().map(|x| x.to_bits()).collect(),
+                    Column::Bool(v) => v.iter().map(|b| u32::from(*b)).collect(),
+                    other => panic!("test data of type {:?}", other.elem_type()),
+                };
+                GpuBuffer {
+                    name,
+                    wgsl_type: "array<u32>",
+                    data: words.into(),
+                }
+            })
+            .collect();
+        Data { columns, buffers }
+    }
 }
 
 /// `u32Data(i)`, `f32Data(i)`, `boolData(i)`: element `i` of input column `column`.
@@ -39,6 +70,34 @@ impl Functor for DataFunctor {
         outputs[0] = dpp_runtime::cpu::kernels::gather(indices, &column.view())
             .map_err(|e| FunctorError(e.to_string()))?;
         Ok(())
+    }
+
+    /// Every input column is a scene buffer; `column` picks one.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let data = request
+            .resources
+            .downcast_ref::<Data>()
+            .ok_or_else(|| FunctorError("no test data".into()))?;
+        let function = request.function;
+        let (ty, convert) = match request.outputs[0] {
+            ElemType::U32 => ("u32", "w"),
+            ElemType::F32 => ("f32", "bitcast<f32>(w)"),
+            _ => ("bool", "w != 0u"),
+        };
+        let mut source = format!(
+            "fn {function}(element: u32, index: u32, column: i32) -> {ty} {{\n    var w = 0u;\n    switch column {{\n"
+        );
+        for (c, name) in data.buffers.iter().map(|b| b.name).enumerate() {
+            source.push_str(&format!("        case {c}: {{ w = {name}[index]; }}\n"));
+        }
+        source.push_str(&format!(
+            "        default: {{}}\n    }}\n    return {convert};\n}}\n"
+        ));
+        Ok(WgslTwin {
+            source,
+            buffers: data.buffers.clone(),
+            ..WgslTwin::default()
+        })
     }
 }
 
@@ -172,34 +231,40 @@ fn case_of_size(n: impl Strategy<Value = usize>) -> impl Strategy<Value = Case> 
     })
 }
 
-fn run(case: &Case, fuse: bool, threads: usize, chunk: usize) -> HashMap<String, OutputValue> {
-    let library = library();
+fn compile_case(case: &Case, library: &FunctorLibrary, fuse: bool) -> Plan {
     let overrides = vec![
         ("n".to_string(), case.n.to_string()),
         ("m".to_string(), case.m.to_string()),
         ("k".to_string(), case.k.to_string()),
     ];
-    let plan = compile_text(
+    compile_text(
         Path::new("primitives.dpp"),
         PIPELINE,
-        &library,
+        library,
         &CompileOptions { fuse, overrides },
     )
-    .unwrap_or_else(|e| panic!("{}", e.render(false)));
-    let data = Data {
-        columns: vec![
-            Column::U32(case.a.clone()),
-            Column::U32(case.b.clone()),
-            Column::U32(case.idx.clone()),
-            Column::U32(case.perm.clone()),
-            Column::Bool(case.keep.clone()),
-            Column::U32(case.dst.clone()),
-            Column::F32(case.f.clone()),
-            Column::Bool(case.flags.clone()),
-            Column::U32(case.grouped.clone()),
-            Column::U32(case.src.clone()),
-        ],
-    };
+    .unwrap_or_else(|e| panic!("{}", e.render(false)))
+}
+
+fn data_of(case: &Case) -> Data {
+    Data::new(vec![
+        Column::U32(case.a.clone()),
+        Column::U32(case.b.clone()),
+        Column::U32(case.idx.clone()),
+        Column::U32(case.perm.clone()),
+        Column::Bool(case.keep.clone()),
+        Column::U32(case.dst.clone()),
+        Column::F32(case.f.clone()),
+        Column::Bool(case.flags.clone()),
+        Column::U32(case.grouped.clone()),
+        Column::U32(case.src.clone()),
+    ])
+}
+
+fn run(case: &Case, fuse: bool, threads: usize, chunk: usize) -> HashMap<String, OutputValue> {
+    let library = library();
+    let plan = compile_case(case, &library, fuse);
+    let data = data_of(case);
     let uniforms = Uniforms::default();
     let context = RunContext {
         library: &library,
@@ -212,6 +277,22 @@ fn run(case: &Case, fuse: bool, threads: usize, chunk: usize) -> HashMap<String,
         .build()
         .unwrap();
     let result = pool.install(|| run_plan(&plan, &context)).unwrap();
+    result.outputs.into_iter().collect()
+}
+
+fn run_gpu(case: &Case, fuse: bool, gpu: &GpuContext) -> HashMap<String, OutputValue> {
+    let library = library();
+    let plan = compile_case(case, &library, fuse);
+    let data = data_of(case);
+    let uniforms = Uniforms::default();
+    let context = GpuRunContext {
+        gpu,
+        library: &library,
+        uniforms: &uniforms,
+        resources: &data,
+        profile: false,
+    };
+    let result = run_plan_gpu(&plan, &context).unwrap_or_else(|e| panic!("{e}"));
     result.outputs.into_iter().collect()
 }
 
@@ -387,4 +468,34 @@ fn default_chunk_size_agrees_with_small_chunks() {
     ] {
         assert_eq!(u32s(&small, name), u32s(&default, name), "{name}");
     }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+
+    /// The GPU backend runs every primitive form to the same results: integers
+    /// bit for bit, float sums within rounding (they add in another order).
+    #[test]
+    fn every_primitive_on_the_gpu_matches_the_reference(case in case()) {
+        let Some(gpu) = common::gpu() else { return Ok(()) };
+        let fused = run_gpu(&case, true, gpu);
+        check_against_reference(&case, &fused);
+        check_against_reference(&case, &run_gpu(&case, false, gpu));
+    }
+}
+
+/// Arrays longer than the adapter's largest binding are split into segments:
+/// with a 3000-byte limit every u32 array of this case has 2 segments, and
+/// the results still match.
+#[test]
+fn arrays_split_into_segments_still_match() {
+    let Some(gpu) = common::gpu() else { return };
+    let small = gpu.with_max_binding_bytes(3000);
+    let mut runner = proptest::test_runner::TestRunner::deterministic();
+    let case = case_of_size(Just(1400))
+        .new_tree(&mut runner)
+        .unwrap()
+        .current();
+    check_against_reference(&case, &run_gpu(&case, true, &small));
+    check_against_reference(&case, &run_gpu(&case, false, &small));
 }

@@ -13,6 +13,8 @@ use crate::functor::{
     Signature, TypeConstraint, TypePattern,
 };
 use crate::types::ElemType;
+use crate::wgsl::{elem_type_wgsl, twin_parameters, WgslModule, WgslRequest, WgslTwin};
+use std::fmt::Display;
 use std::sync::Arc;
 
 /// Registers every generic functor. Panics if one of their names is taken.
@@ -38,10 +40,16 @@ const F32: TypePattern = TypePattern::Exact(ElemType::F32);
 type Kernel =
     Box<dyn Fn(&CallContext<'_>, &[ColumnView<'_>]) -> Result<Column, FunctorError> + Send + Sync>;
 
-/// Every generic functor has one output, which its kernel builds whole.
+/// The WGSL twin of a generic functor: the body of its function for one
+/// instantiation (the element types of `request`), written by type.
+type Generator = Box<dyn Fn(&WgslRequest<'_>) -> Result<Body, FunctorError> + Send + Sync>;
+
+/// Every generic functor has one output, which its kernel builds whole, and a
+/// twin generated per instantiation.
 struct GenericFunctor {
     signature: Signature,
     kernel: Kernel,
+    twin: Generator,
 }
 
 impl Functor for GenericFunctor {
@@ -58,6 +66,130 @@ impl Functor for GenericFunctor {
         outputs[0] = (self.kernel)(ctx, inputs)?;
         Ok(())
     }
+
+    /// `fn {function}({parameters}) -> Out { body }`, the header from the
+    /// signature (so it always matches the calling convention), the body from
+    /// the functor's generator.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let (inputs, outputs) = (&self.signature.inputs, &self.signature.outputs);
+        if request.inputs.len() != inputs.len() || request.outputs.len() != outputs.len() {
+            return Err(FunctorError(format!(
+                "internal error: a WGSL twin of `{}` was asked for {} inputs and {} outputs",
+                self.signature.name,
+                request.inputs.len(),
+                request.outputs.len()
+            )));
+        }
+        let body = (self.twin)(request)?;
+        let parameters: Vec<String> =
+            twin_parameters(&self.signature, request.inputs, request.records)
+                .into_iter()
+                .map(|(name, ty)| format!("{name}: {ty}"))
+                .collect();
+        let source = format!(
+            "fn {}({}) -> {} {{\n{}}}\n",
+            request.function,
+            parameters.join(", "),
+            output_type(request),
+            body.statements
+        );
+        Ok(WgslTwin {
+            source,
+            modules: body.modules,
+            buffers: Vec::new(),
+            failures: body.failures,
+        })
+    }
+}
+
+/// What a generator writes: the statements of a twin's function and what they need.
+#[derive(Default)]
+struct Body {
+    statements: String,
+    modules: Vec<WgslModule>,
+    /// The messages of `{function}_fail(code)`, by code.
+    failures: Vec<String>,
+}
+
+impl Body {
+    fn returns(value: impl Display) -> Body {
+        Body::statements(format!("return {value};"))
+    }
+
+    /// `lines` (one statement a line) indented as the function's body.
+    fn statements(lines: impl AsRef<str>) -> Body {
+        let mut statements = String::new();
+        for line in lines.as_ref().lines() {
+            statements.push_str("    ");
+            statements.push_str(line);
+            statements.push('\n');
+        }
+        Body {
+            statements,
+            ..Body::default()
+        }
+    }
+
+    fn with_module(mut self, module: WgslModule) -> Body {
+        self.modules.push(module);
+        self
+    }
+
+    /// Fails with `message` where `condition` holds, before anything else: the
+    /// backend records the failure and the value returned (zero) is never used.
+    fn failing_when(
+        mut self,
+        request: &WgslRequest<'_>,
+        condition: &str,
+        message: impl Into<String>,
+    ) -> Body {
+        let code = self.failures.len();
+        self.failures.push(message.into());
+        self.statements = format!(
+            "    if ({condition}) {{\n        {}_fail({code}u);\n        return {}();\n    }}\n{}",
+            request.function,
+            output_type(request),
+            self.statements
+        );
+        self
+    }
+}
+
+/// The WGSL spelling of an element type in `request`'s record registry.
+fn wgsl_type(request: &WgslRequest<'_>, ty: ElemType) -> String {
+    elem_type_wgsl(ty, request.records)
+}
+
+fn output_type(request: &WgslRequest<'_>) -> String {
+    wgsl_type(request, request.outputs[0])
+}
+
+/// The unsigned integer type of the same shape as a float type: its bits.
+fn float_bits_type(ty: ElemType) -> Option<&'static str> {
+    match ty {
+        ElemType::F32 => Some("u32"),
+        ElemType::Vec2 => Some("vec2<u32>"),
+        ElemType::Vec3 => Some("vec3<u32>"),
+        ElemType::Vec4 => Some("vec4<u32>"),
+        _ => None,
+    }
+}
+
+/// Whether `value` (a float type, componentwise for vectors) is NaN, tested
+/// on its bits: WGSL implementations may assume that no float is NaN, so a
+/// float comparison could be optimised out.
+fn is_nan(value: &str, ty: ElemType) -> Option<String> {
+    let bits = float_bits_type(ty)?;
+    // Vectors splat the masks; a scalar needs no constructor.
+    let constant = |word: &str| match ty {
+        ElemType::F32 => word.to_string(),
+        _ => format!("{bits}({word})"),
+    };
+    Some(format!(
+        "((bitcast<{bits}>({value}) & {}) > {})",
+        constant("0x7fffffffu"),
+        constant("0x7f800000u")
+    ))
 }
 
 /// A signature with array inputs, one output named `out` and no named parameters.
@@ -90,10 +222,12 @@ fn functor(
         + Send
         + Sync
         + 'static,
+    twin: impl Fn(&WgslRequest<'_>) -> Result<Body, FunctorError> + Send + Sync + 'static,
 ) -> Arc<dyn Functor> {
     Arc::new(GenericFunctor {
         signature,
         kernel: Box::new(kernel),
+        twin: Box::new(twin),
     })
 }
 
@@ -141,7 +275,38 @@ fn monoid_functors() -> Vec<Arc<dyn Functor>> {
             functor(
                 signature(kind, name, &[("a", ty), ("b", ty)], ty, doc),
                 move |_, inputs| Ok(combine_columns(op, &inputs[0], &inputs[1])?),
+                move |request| monoid_twin(op, request),
             )
         })
         .collect()
+}
+
+/// `a op b` as the CPU's [`MonoidElement`](crate::cpu::kernels::MonoidElement)
+/// computes it: integers wrap (as WGSL's do); `f32` `min`/`max` return the
+/// other operand where one is NaN and `a` on a tie (Rust's `f32::min` in a
+/// debug build; the sign of a zero result is unspecified on both sides);
+/// vectors follow glam, `a < b ? a : b` per component, so `b` where either is NaN.
+fn monoid_twin(op: MonoidOp, request: &WgslRequest<'_>) -> Result<Body, FunctorError> {
+    let ty = request.inputs[0];
+    let (name, better) = match op {
+        MonoidOp::Min => ("min", "<"),
+        MonoidOp::Max => ("max", ">"),
+        MonoidOp::Add if ty.is_numeric() => return Ok(Body::returns("a + b")),
+        MonoidOp::Mul if ty.is_numeric() => return Ok(Body::returns("a * b")),
+        MonoidOp::Or if ty == ElemType::Bool => return Ok(Body::returns("a || b")),
+        MonoidOp::And if ty == ElemType::Bool => return Ok(Body::returns("a && b")),
+        _ => return Err(unexpected_type(ty)),
+    };
+    match (ty, is_nan("a", ty), is_nan("b", ty)) {
+        (ElemType::U32 | ElemType::I32, _, _) => Ok(Body::returns(format!("{name}(a, b)"))),
+        (ElemType::F32, Some(a_nan), Some(b_nan)) => Ok(Body::statements(format!(
+            "if ({a_nan}) {{ return b; }}\n\
+             if ({b_nan}) {{ return a; }}\n\
+             return select(a, b, b {better} a);"
+        ))),
+        (_, Some(a_nan), Some(b_nan)) => Ok(Body::returns(format!(
+            "select(b, a, (a {better} b) & !({a_nan} | {b_nan}))"
+        ))),
+        _ => Err(unexpected_type(ty)),
+    }
 }

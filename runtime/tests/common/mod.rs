@@ -141,3 +141,22 @@ macro_rules! check {
 }
 #[allow(unused_imports)]
 pub(crate) use check;
+
+/// The test process's GPU, opened once. Without an adapter the GPU tests
+/// skip with a printed reason, unless `DPP_REQUIRE_GPU` is set (CI sets it,
+/// so there they fail instead of skipping silently).
+pub fn gpu() -> Option<&'static dpp_runtime::gpu::GpuContext> {
+    static GPU: std::sync::OnceLock<Option<dpp_runtime::gpu::GpuContext>> =
+        std::sync::OnceLock::new();
+    GPU.get_or_init(|| match dpp_runtime::gpu::GpuContext::new() {
+        Ok(gpu) => Some(gpu),
+        Err(e) if std::env::var_os("DPP_REQUIRE_GPU").is_some() => {
+            panic!("DPP_REQUIRE_GPU is set but the GPU backend cannot start: {e}")
+        }
+        Err(e) => {
+            eprintln!("skipping GPU checks: {e}");
+            None
+        }
+    })
+    .as_ref()
+}

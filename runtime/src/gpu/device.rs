@@ -1,0 +1,119 @@
+//! Finding an adapter and opening a device with the adapter's own limits.
+
+use std::fmt;
+
+/// Why the GPU backend cannot start or cannot go on.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct GpuError(pub String);
+
+/// Limits the backend plans with: the adapter's, unless a test lowers them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GpuLimits {
+    /// Largest storage-buffer binding in bytes; longer arrays are split into segments.
+    pub max_binding_bytes: u64,
+    /// The device's own binding limit (scene buffers are bound whole).
+    pub device_max_binding_bytes: u64,
+    pub max_buffer_bytes: u64,
+    pub max_storage_buffers_per_stage: u32,
+    pub max_workgroups_per_dimension: u32,
+}
+
+/// An open device and what the backend knows about it.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    pub limits: GpuLimits,
+    /// Whether compute passes can write timestamps (per-stage device time).
+    pub timestamps: bool,
+    /// Compiled kernels by source text, kept across runs.
+    pub(crate) pipelines: super::exec::PipelineCache,
+    /// Scene buffers by name and data, uploaded once.
+    pub(crate) scene_buffers: super::exec::SceneBufferCache,
+}
+
+impl fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("GpuContext")
+            .field("adapter", &self.adapter_name())
+            .field("limits", &self.limits)
+            .finish()
+    }
+}
+
+impl GpuContext {
+    /// Opens the first adapter wgpu offers (`WGPU_BACKEND`, `WGPU_ADAPTER_NAME`
+    /// choose one), with the adapter's limits rather than wgpu's lower defaults.
+    pub fn new() -> Result<GpuContext, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
+            &instance, None,
+        ))
+        .map_err(|e| {
+            GpuError(format!(
+                "no GPU adapter found ({e}); on a machine without a GPU install Mesa's software Vulkan driver \
+                 (Debian: mesa-vulkan-drivers libvulkan1) and set WGPU_BACKEND=vulkan"
+            ))
+        })?;
+        let info = adapter.get_info();
+        let adapter_limits = adapter.limits();
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let mut required_features = wgpu::Features::empty();
+        if timestamps {
+            required_features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("dpp"),
+            required_features,
+            required_limits: adapter_limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError(format!("adapter `{}` refused a device: {e}", info.name)))?;
+        let limits = GpuLimits {
+            max_binding_bytes: adapter_limits
+                .max_storage_buffer_binding_size
+                .min(adapter_limits.max_buffer_size),
+            device_max_binding_bytes: adapter_limits
+                .max_storage_buffer_binding_size
+                .min(adapter_limits.max_buffer_size),
+            max_buffer_bytes: adapter_limits.max_buffer_size,
+            max_storage_buffers_per_stage: adapter_limits.max_storage_buffers_per_shader_stage,
+            max_workgroups_per_dimension: adapter_limits.max_compute_workgroups_per_dimension,
+        };
+        Ok(GpuContext {
+            device,
+            queue,
+            info,
+            limits,
+            timestamps,
+            pipelines: Default::default(),
+            scene_buffers: Default::default(),
+        })
+    }
+
+    /// `llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan, Cpu)`.
+    pub fn adapter_name(&self) -> String {
+        format!(
+            "{} ({:?}, {:?})",
+            self.info.name, self.info.backend, self.info.device_type
+        )
+    }
+
+    /// The same device with a lower binding limit, so that arrays split into
+    /// many segments (tests force the splitting path with it).
+    pub fn with_max_binding_bytes(&self, bytes: u64) -> GpuContext {
+        GpuContext {
+            device: self.device.clone(),
+            queue: self.queue.clone(),
+            info: self.info.clone(),
+            limits: GpuLimits {
+                max_binding_bytes: bytes.max(16),
+                ..self.limits
+            },
+            timestamps: self.timestamps,
+            pipelines: Default::default(),
+            scene_buffers: Default::default(),
+        }
+    }
+}

@@ -1,0 +1,694 @@
+//! Running plans on the device: the [`Backend`] the shared interpreter drives.
+//! Each stage is encoded as one command buffer: buffer copies, then one
+//! compute pass with the stage kernel and its sink kernels. The host waits
+//! only where it must read: a `reduce` result the plan's control flow uses,
+//! the outputs, and (when profiling) the end of every stage.
+
+use super::array::{allocate_array, download, download_words, wait, GpuArray};
+use super::device::{GpuContext, GpuError};
+use super::monoid;
+use super::shader::{Access, Binding, ShaderBuilder, WORKGROUP};
+use super::stage::{build_stage_kernel, SinkWork};
+use crate::column::Column;
+use crate::functor::{FunctorLibrary, MonoidOp};
+use crate::host::{HostValue, Uniforms};
+use crate::interpret::{error, interpret, Backend, RunError, RunResult, Slots, StageCall};
+use crate::types::ElemType;
+use crate::wgsl::{host_type_wgsl, record_structs, GpuBuffer};
+use std::any::Any;
+use std::collections::HashMap;
+use std::fmt::Write;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use wgpu::util::DeviceExt;
+
+pub struct GpuRunContext<'a> {
+    pub gpu: &'a GpuContext,
+    pub library: &'a FunctorLibrary,
+    pub uniforms: &'a Uniforms,
+    /// Scene data for the functors' twins (see [`crate::CallContext::resources`]).
+    pub resources: &'a (dyn Any + Send + Sync),
+    /// Wait for every stage and time it on the device (timestamp queries where
+    /// the adapter has them, else host time around the wait).
+    pub profile: bool,
+}
+
+/// Runs `plan` on the GPU.
+pub fn run_plan_gpu(
+    plan: &crate::Plan,
+    context: &GpuRunContext<'_>,
+) -> Result<RunResult, RunError> {
+    let gpu = context.gpu;
+    let records = &context.library.records;
+    let (uniform_words, uniform_accessors) = uniform_layout(context);
+    let uniforms = gpu
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("dpp uniforms"),
+            contents: bytemuck::cast_slice(&uniform_words),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+    let status = gpu
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("dpp status"),
+            contents: bytemuck::cast_slice(&[0u32; 4]),
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+        });
+    let mut backend = GpuBackend {
+        gpu,
+        library: context.library,
+        resources: context.resources,
+        profile: context.profile,
+        prelude: format!("{}{uniform_accessors}", record_structs(records)),
+        uniforms,
+        status,
+        failures: Mutex::new(Vec::new()),
+    };
+    let result = interpret(plan, &mut backend, context.uniforms, records)?;
+    backend.check_status()?;
+    Ok(result)
+}
+
+/// The run's uniforms as words, and `fn uniform_{record}_{field}()` for each.
+fn uniform_layout(context: &GpuRunContext<'_>) -> (Vec<u32>, String) {
+    let mut words = Vec::new();
+    let mut accessors = String::new();
+    for (record, fields) in &context.library.uniforms.records {
+        for (field, ty) in fields {
+            let offset = words.len();
+            let value = context.uniforms.get(record, field);
+            let wgsl = host_type_wgsl(*ty);
+            let float = |x: f32| x.to_bits();
+            let (value_words, expression): (Vec<u32>, String) = match ty {
+                crate::HostType::Bool => (
+                    vec![u32::from(value.and_then(|v| v.as_bool()).unwrap_or(false))],
+                    format!("uniforms[{offset}] != 0u"),
+                ),
+                crate::HostType::Int => (
+                    vec![value.and_then(|v| v.as_int()).unwrap_or(0) as i32 as u32],
+                    format!("bitcast<i32>(uniforms[{offset}])"),
+                ),
+                crate::HostType::Float => (
+                    vec![float(value.and_then(|v| v.as_f32()).unwrap_or(0.0))],
+                    format!("bitcast<f32>(uniforms[{offset}])"),
+                ),
+                vector => {
+                    let components: Vec<f32> = match (vector, value) {
+                        (crate::HostType::Vec2, v) => {
+                            v.and_then(|v| v.as_vec2()).unwrap_or_default().to_array().to_vec()
+                        }
+                        (crate::HostType::Vec3, v) => {
+                            v.and_then(|v| v.as_vec3()).unwrap_or_default().to_array().to_vec()
+                        }
+                        (_, v) => v.and_then(|v| v.as_vec4()).unwrap_or_default().to_array().to_vec(),
+                    };
+                    let parts: Vec<String> = (0..components.len())
+                        .map(|j| format!("bitcast<f32>(uniforms[{}])", offset + j))
+                        .collect();
+                    (
+                        components.into_iter().map(float).collect(),
+                        format!("{wgsl}({})", parts.join(", ")),
+                    )
+                }
+            };
+            words.extend(value_words);
+            let _ = writeln!(
+                accessors,
+                "fn uniform_{record}_{field}() -> {wgsl} {{ return {expression}; }}"
+            );
+        }
+    }
+    if words.is_empty() {
+        words.push(0);
+    }
+    (words, accessors)
+}
+
+pub struct GpuBackend<'a> {
+    pub gpu: &'a GpuContext,
+    pub library: &'a FunctorLibrary,
+    pub resources: &'a (dyn Any + Send + Sync),
+    profile: bool,
+    /// Record structs and uniform accessors: the start of every shader.
+    prelude: String,
+    uniforms: wgpu::Buffer,
+    status: wgpu::Buffer,
+    /// Failure messages; code `n` is entry `n - 1`. `{a}`, `{b}` are filled
+    /// from the status words.
+    failures: Mutex<Vec<String>>,
+}
+
+/// A kernel ready to dispatch over `threads` invocations.
+struct Dispatch {
+    source: String,
+    bindings: Vec<Binding>,
+    params: Vec<u32>,
+    threads: usize,
+}
+
+impl GpuBackend<'_> {
+    /// The code of a failure message (the same message, the same code, so a
+    /// stage's shader text does not change between runs).
+    pub fn failure(&self, message: &str) -> u32 {
+        let mut failures = self.failures.lock().expect("failure table");
+        let index = match failures.iter().position(|m| m == message) {
+            Some(index) => index,
+            None => {
+                failures.push(message.to_string());
+                failures.len() - 1
+            }
+        };
+        index as u32 + 1
+    }
+
+    /// The device copy of a scene buffer, uploaded once per context.
+    pub fn scene_buffer(&self, buffer: &GpuBuffer) -> Result<wgpu::Buffer, RunError> {
+        let bytes = (buffer.data.len() * 4) as u64;
+        if bytes > self.gpu.limits.device_max_binding_bytes {
+            return Err(error(format!(
+                "scene buffer `{}` has {bytes} bytes, above the adapter `{}`'s largest storage binding ({} bytes)",
+                buffer.name,
+                self.gpu.adapter_name(),
+                self.gpu.limits.device_max_binding_bytes
+            )));
+        }
+        let key = (buffer.name, Arc::as_ptr(&buffer.data) as *const u32 as usize);
+        let mut cache = self.gpu.scene_buffers.lock().expect("scene buffer cache");
+        if let Some((data, device_buffer)) = cache.get(&key) {
+            if Arc::ptr_eq(data, &buffer.data) {
+                return Ok(device_buffer.clone());
+            }
+        }
+        let mut contents: &[u32] = &buffer.data;
+        let placeholder = [0u32];
+        if contents.is_empty() {
+            contents = &placeholder;
+        }
+        let device_buffer = self
+            .gpu
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(buffer.name),
+                contents: bytemuck::cast_slice(contents),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+        cache.insert(key, (buffer.data.clone(), device_buffer.clone()));
+        Ok(device_buffer)
+    }
+
+    fn builder(&self) -> ShaderBuilder<'_> {
+        let params = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("dpp params (placeholder)"),
+            size: 4,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        ShaderBuilder::new(&self.library.records, params, &self.status, &self.uniforms)
+    }
+
+    fn dispatch_of(&self, builder: ShaderBuilder<'_>, threads: usize) -> Dispatch {
+        let mut source = self.prelude.clone();
+        source.push_str(&builder.finish());
+        Dispatch {
+            source,
+            bindings: builder.bindings,
+            params: builder.params,
+            threads,
+        }
+    }
+
+    /// Encodes and submits `dispatches` after the copies already in `encoder`;
+    /// returns the device time when profiling.
+    fn submit(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        dispatches: Vec<Dispatch>,
+    ) -> Result<Option<Duration>, RunError> {
+        let gpu = self.gpu;
+        let max_x = gpu.limits.max_workgroups_per_dimension.max(1) as usize;
+        let mut prepared = Vec::new();
+        for dispatch in dispatches {
+            if dispatch.threads == 0 {
+                continue;
+            }
+            if dispatch.bindings.len() > gpu.limits.max_storage_buffers_per_stage as usize {
+                return Err(error(format!(
+                    "a stage needs {} storage buffers, above the adapter `{}`'s max_storage_buffers_per_shader_stage of {}",
+                    dispatch.bindings.len(),
+                    gpu.adapter_name(),
+                    gpu.limits.max_storage_buffers_per_stage
+                )));
+            }
+            let groups = dispatch.threads.div_ceil(WORKGROUP as usize);
+            let groups_x = groups.min(max_x);
+            let groups_y = groups.div_ceil(groups_x);
+            if groups_y > max_x {
+                return Err(error(format!(
+                    "{} invocations are more than the adapter `{}` can dispatch",
+                    dispatch.threads,
+                    gpu.adapter_name()
+                )));
+            }
+            let mut params = dispatch.params.clone();
+            params[0] = groups_x as u32;
+            params[1] = dispatch.threads as u32;
+            let pipeline = self.pipeline(&dispatch.source, &dispatch.bindings)?;
+            let params_buffer =
+                gpu.device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("dpp params"),
+                        contents: bytemuck::cast_slice(&params),
+                        usage: wgpu::BufferUsages::STORAGE,
+                    });
+            let entries: Vec<wgpu::BindGroupEntry> = dispatch
+                .bindings
+                .iter()
+                .enumerate()
+                .map(|(n, binding)| wgpu::BindGroupEntry {
+                    binding: n as u32,
+                    resource: if n == 0 {
+                        params_buffer.as_entire_binding()
+                    } else {
+                        binding.buffer.as_entire_binding()
+                    },
+                })
+                .collect();
+            let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &pipeline.1,
+                entries: &entries,
+            });
+            prepared.push((pipeline, bind_group, groups_x as u32, groups_y as u32));
+        }
+        let timestamps = (self.profile && gpu.timestamps).then(|| {
+            let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: None,
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            });
+            let resolve = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: None,
+                size: 16,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let read = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: None,
+                size: 16,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            (set, resolve, read)
+        });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: None,
+                timestamp_writes: timestamps.as_ref().map(|(set, _, _)| {
+                    wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: Some(1),
+                    }
+                }),
+            });
+            for (pipeline, bind_group, x, y) in &prepared {
+                pass.set_pipeline(&pipeline.0);
+                pass.set_bind_group(0, bind_group, &[]);
+                pass.dispatch_workgroups(*x, *y, 1);
+            }
+        }
+        if let Some((set, resolve, read)) = &timestamps {
+            encoder.resolve_query_set(set, 0..2, resolve, 0);
+            encoder.copy_buffer_to_buffer(resolve, 0, read, 0, 16);
+        }
+        let start = std::time::Instant::now();
+        gpu.queue.submit([encoder.finish()]);
+        if !self.profile {
+            return Ok(None);
+        }
+        if let Some((_, _, read)) = &timestamps {
+            read.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+        }
+        wait(gpu).map_err(|e| error(e.0))?;
+        let host_time = start.elapsed();
+        let Some((_, _, read)) = &timestamps else {
+            return Ok(Some(host_time));
+        };
+        let view = read
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| error(format!("reading GPU timestamps failed: {e}")))?;
+        let ticks: &[u64] = bytemuck::cast_slice(&view);
+        let nanoseconds =
+            ticks[1].saturating_sub(ticks[0]) as f64 * f64::from(gpu.queue.get_timestamp_period());
+        drop(view);
+        read.unmap();
+        // Some drivers report zero for passes they time coarsely; fall back to host time.
+        Ok(Some(if nanoseconds > 0.0 {
+            Duration::from_nanos(nanoseconds as u64)
+        } else {
+            host_time
+        }))
+    }
+
+    /// The compiled pipeline of a kernel source (cached by source text).
+    fn pipeline(
+        &self,
+        source: &str,
+        bindings: &[Binding],
+    ) -> Result<Arc<(wgpu::ComputePipeline, wgpu::BindGroupLayout)>, RunError> {
+        let mut cache = self.gpu.pipelines.lock().expect("pipeline cache");
+        if let Some(found) = cache.get(source) {
+            return Ok(found.clone());
+        }
+        // Validate first so a bad twin is a clear error, not a device loss.
+        crate::wgsl::validate_wgsl(source).map_err(|e| {
+            error(format!(
+                "internal error: a generated GPU kernel does not compile:\n{e}"
+            ))
+        })?;
+        let device = &self.gpu.device;
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = bindings
+            .iter()
+            .enumerate()
+            .map(|(n, b)| wgpu::BindGroupLayoutEntry {
+                binding: n as u32,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage {
+                        read_only: b.read_only,
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            })
+            .collect();
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: None,
+            entries: &entries,
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: None,
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: None,
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: None,
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let entry = Arc::new((pipeline, layout));
+        cache.insert(source.to_string(), entry.clone());
+        Ok(entry)
+    }
+
+    /// Fails the run if a kernel recorded a failure; clears it otherwise.
+    fn check_status(&self) -> Result<(), RunError> {
+        let words = read_buffer_words(self.gpu, &self.status, 3).map_err(|e| error(e.0))?;
+        if words[0] == 0 {
+            return Ok(());
+        }
+        let failures = self.failures.lock().expect("failure table");
+        let message = failures
+            .get(words[0] as usize - 1)
+            .cloned()
+            .unwrap_or_else(|| format!("unknown GPU failure {}", words[0]));
+        Err(error(
+            message
+                .replace("{a}", &words[1].to_string())
+                .replace("{b}", &words[2].to_string()),
+        ))
+    }
+
+    /// The reduce kernels: blocks of `BLOCK` elements per invocation, level by
+    /// level, until one element is left.
+    fn reduce(
+        &self,
+        op: MonoidOp,
+        values: &GpuArray,
+        dispatches: &mut Vec<Dispatch>,
+    ) -> Result<GpuArray, RunError> {
+        let records = &self.library.records;
+        let mut level = values.clone();
+        loop {
+            let blocks = level.len.div_ceil(BLOCK).max(1);
+            let out = allocate_array(self.gpu, level.ty, blocks, records).map_err(|e| error(e.0))?;
+            let mut builder = self.builder();
+            let combine =
+                monoid::combine_function(op, level.ty, &mut builder.functions).map_err(error)?;
+            let identity = monoid::identity(op, level.ty).map_err(error)?;
+            let load = builder.array_loader(&level);
+            let n = builder.param_u32(level.len as u32);
+            let store = builder.array_store(&out, "i", "running");
+            let _ = write!(
+                builder.body,
+                "    let start = i * {BLOCK}u;\n    let end = min(start + {BLOCK}u, {n});\n\
+                 \x20   var running = {identity};\n\
+                 \x20   for (var j = start; j < end; j++) {{ running = {combine}(running, {load}(j)); }}\n\
+                 \x20   {store}"
+            );
+            dispatches.push(self.dispatch_of(builder, blocks));
+            if blocks == 1 {
+                return Ok(out);
+            }
+            level = out;
+        }
+    }
+
+    /// The scan kernels (see `scan_levels`); returns the scanned array.
+    fn scan(
+        &self,
+        op: MonoidOp,
+        inclusive: bool,
+        values: &GpuArray,
+        flags: Option<&GpuArray>,
+        dispatches: &mut Vec<Dispatch>,
+    ) -> Result<GpuArray, RunError> {
+        let records = &self.library.records;
+        let gpu_error = |e: GpuError| error(e.0);
+        let n = values.len;
+        let out = allocate_array(self.gpu, values.ty, n, records).map_err(gpu_error)?;
+        if n == 0 {
+            return Ok(out);
+        }
+        let blocks = n.div_ceil(BLOCK);
+        // Pass 1: each block's (value since its last segment start, started) pair.
+        let totals = allocate_array(self.gpu, values.ty, blocks, records).map_err(gpu_error)?;
+        let starts = allocate_array(self.gpu, ElemType::Bool, blocks, records).map_err(gpu_error)?;
+        let identity = monoid::identity(op, values.ty).map_err(error)?;
+        {
+            let mut builder = self.builder();
+            let combine =
+                monoid::combine_function(op, values.ty, &mut builder.functions).map_err(error)?;
+            let load = builder.array_loader(values);
+            let flag = match flags {
+                Some(f) => format!("{}(j)", builder.array_loader(f)),
+                None => "false".into(),
+            };
+            let count = builder.param_u32(n as u32);
+            let store_total = builder.array_store(&totals, "i", "running");
+            let store_start = builder.array_store(&starts, "i", "started");
+            let _ = write!(
+                builder.body,
+                "    let start = i * {BLOCK}u;\n    let end = min(start + {BLOCK}u, {count});\n\
+                 \x20   var running = {identity};\n    var started = false;\n\
+                 \x20   for (var j = start; j < end; j++) {{\n\
+                 \x20       if ({flag}) {{ running = {load}(j); started = true; }} else {{ running = {combine}(running, {load}(j)); }}\n\
+                 \x20   }}\n    {store_total}    {store_start}"
+            );
+            dispatches.push(self.dispatch_of(builder, blocks));
+        }
+        // Pass 2: carries. Block t starts from the inclusive segmented scan of
+        // the totals up to block t - 1.
+        let carries = if blocks > 1 {
+            Some(self.scan(op, true, &totals, Some(&starts), dispatches)?)
+        } else {
+            None
+        };
+        // Pass 3: each block rescanned from its carry, as the CPU's scan_chunk.
+        let mut builder = self.builder();
+        let combine =
+            monoid::combine_function(op, values.ty, &mut builder.functions).map_err(error)?;
+        let load = builder.array_loader(values);
+        let flag = match flags {
+            Some(f) => format!("{}(j)", builder.array_loader(f)),
+            None => "false".into(),
+        };
+        let carry = match &carries {
+            Some(c) => format!(
+                "select({identity}, {}(max(i, 1u) - 1u), i > 0u)",
+                builder.array_loader(c)
+            ),
+            None => identity.clone(),
+        };
+        let count = builder.param_u32(n as u32);
+        let result = if inclusive { "running" } else { "before" };
+        let store = builder.array_store(&out, "j", result);
+        let _ = write!(
+            builder.body,
+            "    let start = i * {BLOCK}u;\n    let end = min(start + {BLOCK}u, {count});\n\
+             \x20   var running = {carry};\n\
+             \x20   for (var j = start; j < end; j++) {{\n\
+             \x20       let restarts = {flag};\n\
+             \x20       let value = {load}(j);\n\
+             \x20       let before = select(running, {identity}, restarts);\n\
+             \x20       running = select({combine}(running, value), value, restarts);\n\
+             \x20       {store}\
+             \x20   }}\n"
+        );
+        dispatches.push(self.dispatch_of(builder, blocks));
+        Ok(out)
+    }
+
+    /// The second pass of a plain scatter: the last writer of each slot writes.
+    fn scatter_write(
+        &self,
+        indices: &GpuArray,
+        values: &GpuArray,
+        mask: Option<&GpuArray>,
+        winner: &GpuArray,
+        target: &GpuArray,
+    ) -> Dispatch {
+        let mut builder = self.builder();
+        let index = builder.array_loader(indices);
+        let value = builder.array_loader(values);
+        let winner_load = builder.field(&winner.fields[0], Access::Read);
+        let used = match mask {
+            Some(m) => format!("{}(i)", builder.array_loader(m)),
+            None => "true".into(),
+        };
+        let len = builder.param_u32(target.len as u32);
+        let store = builder.array_store(target, "slot", &format!("{value}(i)"));
+        let _ = write!(
+            builder.body,
+            "    let slot = {index}(i);\n\
+             \x20   if ({used} && slot < {len} && {winner_load}_load(slot) == i + 1u) {{\n        {store}    }}\n"
+        );
+        self.dispatch_of(builder, indices.len)
+    }
+}
+
+/// Elements per invocation in the reduce and scan kernels.
+const BLOCK: usize = 256;
+
+fn read_buffer_words(
+    gpu: &GpuContext,
+    buffer: &wgpu::Buffer,
+    words: usize,
+) -> Result<Vec<u32>, GpuError> {
+    let field = super::array::Field {
+        ty: ElemType::U32,
+        len: words,
+        segment: words,
+        buffers: vec![buffer.clone()],
+    };
+    download_words(gpu, &field)
+}
+
+impl Backend for GpuBackend<'_> {
+    type Array = GpuArray;
+
+    fn len(array: &GpuArray) -> usize {
+        array.len
+    }
+
+    fn field(&self, array: &GpuArray, index: usize) -> Option<GpuArray> {
+        let field = array.fields.get(index)?;
+        matches!(array.ty, ElemType::Record(_)).then(|| GpuArray {
+            ty: field.ty,
+            len: array.len,
+            fields: vec![field.clone()],
+        })
+    }
+
+    fn run_stage(
+        &mut self,
+        call: &StageCall<'_>,
+        slots: &mut Slots<GpuArray>,
+    ) -> Result<Option<Duration>, RunError> {
+        let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
+        let builder = self.builder();
+        let kernel = build_stage_kernel(self, call, slots, builder, &mut encoder)?;
+        let mut dispatches = vec![self.dispatch_of(kernel.builder, call.len)];
+        let sink_op = call.stage.ops.last().expect("a stage has ops");
+        let mut reduced = None;
+        match &kernel.sink {
+            SinkWork::None => {}
+            SinkWork::Scatter {
+                indices,
+                values,
+                mask,
+                winner,
+                target,
+            } => {
+                dispatches.push(self.scatter_write(indices, values, mask.as_ref(), winner, target));
+                slots.set_array(sink_op.outputs[0], target.clone());
+            }
+            SinkWork::Reduce { op, values } => {
+                reduced = Some((*op, self.reduce(*op, values, &mut dispatches)?));
+            }
+            SinkWork::Scan {
+                op,
+                exclusive,
+                values,
+                flags,
+            } => {
+                let out = self.scan(*op, !exclusive, values, flags.as_ref(), &mut dispatches)?;
+                slots.set_array(sink_op.outputs[0], out);
+            }
+        }
+        let time = self.submit(encoder, dispatches)?;
+        if let Some((op, result)) = reduced {
+            // The host needs the value now: wait, and check for failures first.
+            self.check_status()?;
+            let value = if call.len == 0 {
+                crate::cpu::kernels::identity(op, result.ty)
+                    .map_err(|e| error(e.to_string()))?
+                    .to_host()
+            } else {
+                element_to_host(&download(self.gpu, &result, &self.library.records).map_err(|e| error(e.0))?)
+            };
+            slots.set_host(sink_op.outputs[0], value);
+        }
+        if self.profile {
+            self.check_status()?;
+        }
+        Ok(time)
+    }
+
+    fn to_column(&mut self, array: &GpuArray) -> Result<Arc<Column>, RunError> {
+        self.check_status()?;
+        download(self.gpu, array, &self.library.records)
+            .map(Arc::new)
+            .map_err(|e| error(e.0))
+    }
+}
+
+/// The single element of a one-element column as a host value.
+fn element_to_host(column: &Column) -> HostValue {
+    match column {
+        Column::Bool(v) => HostValue::Bool(v[0]),
+        Column::U32(v) => HostValue::Int(i64::from(v[0])),
+        Column::I32(v) => HostValue::Int(i64::from(v[0])),
+        Column::F32(v) => HostValue::Float(f64::from(v[0])),
+        Column::Vec2(v) => HostValue::Vec2(v[0].to_array()),
+        Column::Vec3(v) => HostValue::Vec3(v[0].to_array()),
+        Column::Vec4(v) => HostValue::Vec4(v[0].to_array()),
+        Column::Record { .. } => unreachable!("reductions are over primitives"),
+    }
+}
+
+/// The caches a context keeps across runs.
+pub type PipelineCache = Mutex<HashMap<String, Arc<(wgpu::ComputePipeline, wgpu::BindGroupLayout)>>>;
+pub type SceneBufferCache = Mutex<HashMap<(&'static str, usize), (Arc<[u32]>, wgpu::Buffer)>>;

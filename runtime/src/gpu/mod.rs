@@ -1,0 +1,15 @@
+//! The GPU backend (wgpu): the same plans as the CPU backend, one compute
+//! shader per stage made by composing the stage's functor twins in stage
+//! order, plus multi-pass kernels for reduce, scan and plain scatter that do
+//! not rely on forward progress between workgroups.
+
+pub mod array;
+mod device;
+mod exec;
+mod monoid;
+mod shader;
+mod stage;
+
+pub use array::GpuArray;
+pub use device::{GpuContext, GpuError, GpuLimits};
+pub use exec::{run_plan_gpu, GpuRunContext};
