@@ -146,6 +146,18 @@ pub fn interpret<B: Backend>(
     uniforms: &Uniforms,
     records: &RecordRegistry,
 ) -> Result<RunResult, RunError> {
+    interpret_with_inputs(plan, backend, uniforms, records, Vec::new())
+}
+
+/// Runs `plan` with some array variables already holding values (a plan
+/// built in code to run one functor on given arrays).
+pub fn interpret_with_inputs<B: Backend>(
+    plan: &Plan,
+    backend: &mut B,
+    uniforms: &Uniforms,
+    records: &RecordRegistry,
+    inputs: Vec<(VarId, B::Array)>,
+) -> Result<RunResult, RunError> {
     let stages = plan.stages();
     let mut interpreter = Interpreter {
         plan,
@@ -170,6 +182,9 @@ pub fn interpret<B: Backend>(
             .collect(),
         stages,
     };
+    for (var, array) in inputs {
+        interpreter.slots.set_array(var, array);
+    }
     interpreter.nodes(&plan.body)?;
     let mut outputs = Vec::new();
     for name in &plan.outputs {

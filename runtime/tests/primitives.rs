@@ -5,101 +5,12 @@
 mod common;
 
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
-use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
-use dpp_runtime::wgsl::{GpuBuffer, WgslRequest, WgslTwin};
+use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuLimits, GpuRunContext};
 use dpp_runtime::*;
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
 use std::collections::HashMap;
 use std::path::Path;
-use std::sync::Arc;
-
-/// The test's input columns, handed to the `…Data` functors as run resources
-/// (and as words, for their GPU twin).
-struct Data {
-    columns: Vec<Column>,
-    buffers: Vec<GpuBuffer>,
-}
-
-const DATA_NAMES: [&str; 10] = [
-    "data0", "data1", "data2", "data3", "data4", "data5", "data6", "data7", "data8", "data9",
-];
-
-impl Data {
-    fn new(columns: Vec<Column>) -> Data {
-        let buffers = columns
-            .iter()
-            .zip(DATA_NAMES)
-            .map(|(column, name)| {
-                let words: Vec<u32> = match column {
-                    Column::U32(v) => v.clone(),
-                    Column::F32(v) => v.iter().map(|x| x.to_bits()).collect(),
-                    Column::Bool(v) => v.iter().map(|b| u32::from(*b)).collect(),
-                    other => panic!("test data of type {:?}", other.elem_type()),
-                };
-                GpuBuffer {
-                    name,
-                    wgsl_type: "array<u32>",
-                    data: words.into(),
-                }
-            })
-            .collect();
-        Data { columns, buffers }
-    }
-}
-
-/// `u32Data(i)`, `f32Data(i)`, `boolData(i)`: element `i` of input column `column`.
-struct DataFunctor {
-    signature: Signature,
-}
-
-impl Functor for DataFunctor {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let data = ctx.resources::<Data>()?;
-        let column = &data.columns[ctx.named(0).as_int().unwrap() as usize];
-        let indices = inputs[0].as_u32();
-        outputs[0] = dpp_runtime::cpu::kernels::gather(indices, &column.view())
-            .map_err(|e| FunctorError(e.to_string()))?;
-        Ok(())
-    }
-
-    /// Every input column is a scene buffer; `column` picks one.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let data = request
-            .resources
-            .downcast_ref::<Data>()
-            .ok_or_else(|| FunctorError("no test data".into()))?;
-        let function = request.function;
-        let (ty, convert) = match request.outputs[0] {
-            ElemType::U32 => ("u32", "w"),
-            ElemType::F32 => ("f32", "bitcast<f32>(w)"),
-            _ => ("bool", "w != 0u"),
-        };
-        let mut source = format!(
-            "fn {function}(element: u32, index: u32, column: i32) -> {ty} {{\n    var w = 0u;\n    switch column {{\n"
-        );
-        for (c, name) in data.buffers.iter().map(|b| b.name).enumerate() {
-            source.push_str(&format!("        case {c}: {{ w = {name}[index]; }}\n"));
-        }
-        source.push_str(&format!(
-            "        default: {{}}\n    }}\n    return {convert};\n}}\n"
-        ));
-        Ok(WgslTwin {
-            source,
-            buffers: data.buffers.clone(),
-            ..WgslTwin::default()
-        })
-    }
-}
 
 fn library() -> FunctorLibrary {
     let mut library = common::library();
@@ -108,27 +19,7 @@ fn library() -> FunctorLibrary {
         ("f32Data", ElemType::F32),
         ("boolData", ElemType::Bool),
     ] {
-        library.register(Arc::new(DataFunctor {
-            signature: Signature {
-                name,
-                kind: FunctorKind::Map,
-                inputs: vec![ArrayParam {
-                    name: "index",
-                    ty: TypePattern::Exact(ElemType::U32),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "value",
-                    ty: TypePattern::Exact(ty),
-                }],
-                named: vec![NamedParam {
-                    name: "column",
-                    ty: HostType::Int,
-                    default: None,
-                    doc: "input column",
-                }],
-                doc: "test input",
-            },
-        }));
+        common::register_data_functor(&mut library, name, ty);
     }
     library
 }
@@ -246,8 +137,8 @@ fn compile_case(case: &Case, library: &FunctorLibrary, fuse: bool) -> Plan {
     .unwrap_or_else(|e| panic!("{}", e.render(false)))
 }
 
-fn data_of(case: &Case) -> Data {
-    Data::new(vec![
+fn data_of(case: &Case) -> common::Data {
+    common::Data::new(vec![
         Column::U32(case.a.clone()),
         Column::U32(case.b.clone()),
         Column::U32(case.idx.clone()),
@@ -490,7 +381,10 @@ proptest! {
 #[test]
 fn arrays_split_into_segments_still_match() {
     let Some(gpu) = common::gpu() else { return };
-    let small = gpu.with_max_binding_bytes(3000);
+    let small = gpu.with_limits(GpuLimits {
+        max_binding_bytes: 3000,
+        ..gpu.limits
+    });
     let mut runner = proptest::test_runner::TestRunner::deterministic();
     let case = case_of_size(Just(1400))
         .new_tree(&mut runner)
@@ -498,4 +392,22 @@ fn arrays_split_into_segments_still_match() {
         .current();
     check_against_reference(&case, &run_gpu(&case, true, &small));
     check_against_reference(&case, &run_gpu(&case, false, &small));
+}
+
+/// More workgroups than the adapter allows along one dimension are
+/// dispatched in two: with at most 16 per dimension, 4099 elements need 65
+/// workgroups of 64, so 16 × 5.
+#[test]
+fn many_workgroups_use_a_two_dimensional_dispatch() {
+    let Some(gpu) = common::gpu() else { return };
+    let narrow = gpu.with_limits(GpuLimits {
+        max_workgroups_per_dimension: 16,
+        ..gpu.limits
+    });
+    let mut runner = proptest::test_runner::TestRunner::deterministic();
+    let case = case_of_size(Just(4099))
+        .new_tree(&mut runner)
+        .unwrap()
+        .current();
+    check_against_reference(&case, &run_gpu(&case, true, &narrow));
 }

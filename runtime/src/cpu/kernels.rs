@@ -317,6 +317,39 @@ macro_rules! impl_integer_monoid {
 
 impl_integer_monoid!(u32, i32);
 
+/// `f32::min`/`max` per component: NaN is ignored, so the operation stays
+/// associative and a GPU reduction in another order agrees.
+trait NanIgnoringMinMax: Copy {
+    fn nan_ignoring_min(self, other: Self) -> Self;
+    fn nan_ignoring_max(self, other: Self) -> Self;
+}
+
+impl NanIgnoringMinMax for f32 {
+    fn nan_ignoring_min(self, other: f32) -> f32 {
+        self.min(other)
+    }
+    fn nan_ignoring_max(self, other: f32) -> f32 {
+        self.max(other)
+    }
+}
+
+macro_rules! impl_nan_ignoring_vector {
+    ($($t:ty),*) => {$(
+        impl NanIgnoringMinMax for $t {
+            fn nan_ignoring_min(self, other: $t) -> $t {
+                let (a, b) = (self.to_array(), other.to_array());
+                <$t>::from_array(std::array::from_fn(|i| a[i].min(b[i])))
+            }
+            fn nan_ignoring_max(self, other: $t) -> $t {
+                let (a, b) = (self.to_array(), other.to_array());
+                <$t>::from_array(std::array::from_fn(|i| a[i].max(b[i])))
+            }
+        }
+    )*};
+}
+
+impl_nan_ignoring_vector!(Vec2, Vec3, Vec4);
+
 macro_rules! impl_float_monoid {
     ($($t:ty: zero $zero:expr, one $one:expr, infinity $infinity:expr;)*) => {$(
         impl MonoidElement for $t {
@@ -334,8 +367,8 @@ macro_rules! impl_float_monoid {
                 match op {
                     MonoidOp::Add => a + b,
                     MonoidOp::Mul => a * b,
-                    MonoidOp::Min => a.min(b),
-                    MonoidOp::Max => a.max(b),
+                    MonoidOp::Min => a.nan_ignoring_min(b),
+                    MonoidOp::Max => a.nan_ignoring_max(b),
                     MonoidOp::Or | MonoidOp::And => {
                         unreachable!("{op:?} has no identity on {}", stringify!($t))
                     }

@@ -282,31 +282,35 @@ fn monoid_functors() -> Vec<Arc<dyn Functor>> {
 }
 
 /// `a op b` as the CPU's [`MonoidElement`](crate::cpu::kernels::MonoidElement)
-/// computes it: integers wrap (as WGSL's do); `f32` `min`/`max` return the
-/// other operand where one is NaN and `a` on a tie (Rust's `f32::min` in a
-/// debug build; the sign of a zero result is unspecified on both sides);
-/// vectors follow glam, `a < b ? a : b` per component, so `b` where either is NaN.
+/// computes it: integers wrap (as WGSL's do); float `min`/`max`, per
+/// component for vectors, return the other operand where one is NaN and `a`
+/// on a tie (Rust's `f32::min`; the sign of a zero result is unspecified on
+/// both sides). Ignoring NaN keeps them associative, so a reduction in any
+/// order agrees.
 fn monoid_twin(op: MonoidOp, request: &WgslRequest<'_>) -> Result<Body, FunctorError> {
-    let ty = request.inputs[0];
+    monoid_statements(op, request.inputs[0])
+        .map(Body::statements)
+        .ok_or_else(|| unexpected_type(request.inputs[0]))
+}
+
+/// The statements of `fn (a: T, b: T) -> T { … }` computing `a op b`: the
+/// monoid twins' and the GPU backend's reductions, scans and combining
+/// scatters, one definition for both.
+pub(crate) fn monoid_statements(op: MonoidOp, ty: ElemType) -> Option<String> {
     let (name, better) = match op {
         MonoidOp::Min => ("min", "<"),
         MonoidOp::Max => ("max", ">"),
-        MonoidOp::Add if ty.is_numeric() => return Ok(Body::returns("a + b")),
-        MonoidOp::Mul if ty.is_numeric() => return Ok(Body::returns("a * b")),
-        MonoidOp::Or if ty == ElemType::Bool => return Ok(Body::returns("a || b")),
-        MonoidOp::And if ty == ElemType::Bool => return Ok(Body::returns("a && b")),
-        _ => return Err(unexpected_type(ty)),
+        MonoidOp::Add if ty.is_numeric() => return Some("return a + b;".into()),
+        MonoidOp::Mul if ty.is_numeric() => return Some("return a * b;".into()),
+        MonoidOp::Or if ty == ElemType::Bool => return Some("return a || b;".into()),
+        MonoidOp::And if ty == ElemType::Bool => return Some("return a && b;".into()),
+        _ => return None,
     };
     match (ty, is_nan("a", ty), is_nan("b", ty)) {
-        (ElemType::U32 | ElemType::I32, _, _) => Ok(Body::returns(format!("{name}(a, b)"))),
-        (ElemType::F32, Some(a_nan), Some(b_nan)) => Ok(Body::statements(format!(
-            "if ({a_nan}) {{ return b; }}\n\
-             if ({b_nan}) {{ return a; }}\n\
-             return select(a, b, b {better} a);"
-        ))),
-        (_, Some(a_nan), Some(b_nan)) => Ok(Body::returns(format!(
-            "select(b, a, (a {better} b) & !({a_nan} | {b_nan}))"
-        ))),
-        _ => Err(unexpected_type(ty)),
+        (ElemType::U32 | ElemType::I32, _, _) => Some(format!("return {name}(a, b);")),
+        (_, Some(a_nan), Some(b_nan)) => Some(format!(
+            "return select(select(select(a, b, b {better} a), a, {b_nan}), b, {a_nan});"
+        )),
+        _ => None,
     }
 }

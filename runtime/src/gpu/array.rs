@@ -191,7 +191,10 @@ pub fn download(
                 fields: columns.into_iter().map(Arc::new).collect(),
             }
         }
-        _ => columns.into_iter().next().expect("a primitive array has one field"),
+        _ => columns
+            .into_iter()
+            .next()
+            .expect("a primitive array has one field"),
     })
 }
 
@@ -231,9 +234,21 @@ fn column_words(column: &Column) -> Vec<u32> {
         Column::U32(v) => v.clone(),
         Column::I32(v) => v.iter().map(|x| *x as u32).collect(),
         Column::F32(v) => v.iter().map(|x| x.to_bits()).collect(),
-        Column::Vec2(v) => v.iter().flat_map(|x| x.to_array()).map(f32::to_bits).collect(),
-        Column::Vec3(v) => v.iter().flat_map(|x| x.to_array()).map(f32::to_bits).collect(),
-        Column::Vec4(v) => v.iter().flat_map(|x| x.to_array()).map(f32::to_bits).collect(),
+        Column::Vec2(v) => v
+            .iter()
+            .flat_map(|x| x.to_array())
+            .map(f32::to_bits)
+            .collect(),
+        Column::Vec3(v) => v
+            .iter()
+            .flat_map(|x| x.to_array())
+            .map(f32::to_bits)
+            .collect(),
+        Column::Vec4(v) => v
+            .iter()
+            .flat_map(|x| x.to_array())
+            .map(f32::to_bits)
+            .collect(),
         Column::Record { .. } => unreachable!("record fields are primitive"),
     }
 }

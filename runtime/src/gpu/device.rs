@@ -46,7 +46,8 @@ impl GpuContext {
     /// Opens the first adapter wgpu offers (`WGPU_BACKEND`, `WGPU_ADAPTER_NAME`
     /// choose one), with the adapter's limits rather than wgpu's lower defaults.
     pub fn new() -> Result<GpuContext, GpuError> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
             &instance, None,
         ))
@@ -100,20 +101,41 @@ impl GpuContext {
         )
     }
 
-    /// The same device with a lower binding limit, so that arrays split into
-    /// many segments (tests force the splitting path with it).
-    pub fn with_max_binding_bytes(&self, bytes: u64) -> GpuContext {
+    /// The same device planned with other (lower) limits, so that tests can
+    /// force the paths real sizes take: arrays split into many segments, 2-D
+    /// dispatches.
+    pub fn with_limits(&self, limits: GpuLimits) -> GpuContext {
         GpuContext {
             device: self.device.clone(),
             queue: self.queue.clone(),
             info: self.info.clone(),
             limits: GpuLimits {
-                max_binding_bytes: bytes.max(16),
-                ..self.limits
+                max_binding_bytes: limits.max_binding_bytes.max(16),
+                device_max_binding_bytes: self.limits.device_max_binding_bytes,
+                ..limits
             },
             timestamps: self.timestamps,
             pipelines: Default::default(),
             scene_buffers: Default::default(),
         }
     }
+}
+
+/// The process's GPU for test suites, opened once. Without an adapter it
+/// prints why and returns `None` (the caller skips), unless the environment
+/// variable `DPP_REQUIRE_GPU` is set: CI sets it, so there a missing adapter
+/// fails the tests instead of skipping them silently.
+pub fn gpu_for_tests() -> Option<&'static GpuContext> {
+    static GPU: std::sync::OnceLock<Option<GpuContext>> = std::sync::OnceLock::new();
+    GPU.get_or_init(|| match GpuContext::new() {
+        Ok(gpu) => Some(gpu),
+        Err(e) if std::env::var_os("DPP_REQUIRE_GPU").is_some() => {
+            panic!("DPP_REQUIRE_GPU is set but the GPU backend cannot start: {e}")
+        }
+        Err(e) => {
+            eprintln!("skipping GPU checks: {e}");
+            None
+        }
+    })
+    .as_ref()
 }

@@ -12,7 +12,9 @@ use super::stage::{build_stage_kernel, SinkWork};
 use crate::column::Column;
 use crate::functor::{FunctorLibrary, MonoidOp};
 use crate::host::{HostValue, Uniforms};
-use crate::interpret::{error, interpret, Backend, RunError, RunResult, Slots, StageCall};
+use crate::interpret::{
+    error, interpret_with_inputs, Backend, RunError, RunResult, Slots, StageCall,
+};
 use crate::types::ElemType;
 use crate::wgsl::{host_type_wgsl, record_structs, GpuBuffer};
 use std::any::Any;
@@ -37,6 +39,15 @@ pub struct GpuRunContext<'a> {
 pub fn run_plan_gpu(
     plan: &crate::Plan,
     context: &GpuRunContext<'_>,
+) -> Result<RunResult, RunError> {
+    run_plan_gpu_with_inputs(plan, context, Vec::new())
+}
+
+/// Runs `plan` with some array variables already on the device.
+pub(crate) fn run_plan_gpu_with_inputs(
+    plan: &crate::Plan,
+    context: &GpuRunContext<'_>,
+    inputs: Vec<(crate::compile::ir::VarId, GpuArray)>,
 ) -> Result<RunResult, RunError> {
     let gpu = context.gpu;
     let records = &context.library.records;
@@ -67,7 +78,7 @@ pub fn run_plan_gpu(
         status,
         failures: Mutex::new(Vec::new()),
     };
-    let result = interpret(plan, &mut backend, context.uniforms, records)?;
+    let result = interpret_with_inputs(plan, &mut backend, context.uniforms, records, inputs)?;
     backend.check_status()?;
     Ok(result)
 }
@@ -97,13 +108,21 @@ fn uniform_layout(context: &GpuRunContext<'_>) -> (Vec<u32>, String) {
                 ),
                 vector => {
                     let components: Vec<f32> = match (vector, value) {
-                        (crate::HostType::Vec2, v) => {
-                            v.and_then(|v| v.as_vec2()).unwrap_or_default().to_array().to_vec()
-                        }
-                        (crate::HostType::Vec3, v) => {
-                            v.and_then(|v| v.as_vec3()).unwrap_or_default().to_array().to_vec()
-                        }
-                        (_, v) => v.and_then(|v| v.as_vec4()).unwrap_or_default().to_array().to_vec(),
+                        (crate::HostType::Vec2, v) => v
+                            .and_then(|v| v.as_vec2())
+                            .unwrap_or_default()
+                            .to_array()
+                            .to_vec(),
+                        (crate::HostType::Vec3, v) => v
+                            .and_then(|v| v.as_vec3())
+                            .unwrap_or_default()
+                            .to_array()
+                            .to_vec(),
+                        (_, v) => v
+                            .and_then(|v| v.as_vec4())
+                            .unwrap_or_default()
+                            .to_array()
+                            .to_vec(),
                     };
                     let parts: Vec<String> = (0..components.len())
                         .map(|j| format!("bitcast<f32>(uniforms[{}])", offset + j))
@@ -175,7 +194,10 @@ impl GpuBackend<'_> {
                 self.gpu.limits.device_max_binding_bytes
             )));
         }
-        let key = (buffer.name, Arc::as_ptr(&buffer.data) as *const u32 as usize);
+        let key = (
+            buffer.name,
+            Arc::as_ptr(&buffer.data) as *const u32 as usize,
+        );
         let mut cache = self.gpu.scene_buffers.lock().expect("scene buffer cache");
         if let Some((data, device_buffer)) = cache.get(&key) {
             if Arc::ptr_eq(data, &buffer.data) {
@@ -256,13 +278,13 @@ impl GpuBackend<'_> {
             params[0] = groups_x as u32;
             params[1] = dispatch.threads as u32;
             let pipeline = self.pipeline(&dispatch.source, &dispatch.bindings)?;
-            let params_buffer =
-                gpu.device
-                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some("dpp params"),
-                        contents: bytemuck::cast_slice(&params),
-                        usage: wgpu::BufferUsages::STORAGE,
-                    });
+            let params_buffer = gpu
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("dpp params"),
+                    contents: bytemuck::cast_slice(&params),
+                    usage: wgpu::BufferUsages::STORAGE,
+                });
             let entries: Vec<wgpu::BindGroupEntry> = dispatch
                 .bindings
                 .iter()
@@ -443,7 +465,8 @@ impl GpuBackend<'_> {
         let mut level = values.clone();
         loop {
             let blocks = level.len.div_ceil(BLOCK).max(1);
-            let out = allocate_array(self.gpu, level.ty, blocks, records).map_err(|e| error(e.0))?;
+            let out =
+                allocate_array(self.gpu, level.ty, blocks, records).map_err(|e| error(e.0))?;
             let mut builder = self.builder();
             let combine =
                 monoid::combine_function(op, level.ty, &mut builder.functions).map_err(error)?;
@@ -485,7 +508,8 @@ impl GpuBackend<'_> {
         let blocks = n.div_ceil(BLOCK);
         // Pass 1: each block's (value since its last segment start, started) pair.
         let totals = allocate_array(self.gpu, values.ty, blocks, records).map_err(gpu_error)?;
-        let starts = allocate_array(self.gpu, ElemType::Bool, blocks, records).map_err(gpu_error)?;
+        let starts =
+            allocate_array(self.gpu, ElemType::Bool, blocks, records).map_err(gpu_error)?;
         let identity = monoid::identity(op, values.ty).map_err(error)?;
         {
             let mut builder = self.builder();
@@ -657,7 +681,9 @@ impl Backend for GpuBackend<'_> {
                     .map_err(|e| error(e.to_string()))?
                     .to_host()
             } else {
-                element_to_host(&download(self.gpu, &result, &self.library.records).map_err(|e| error(e.0))?)
+                element_to_host(
+                    &download(self.gpu, &result, &self.library.records).map_err(|e| error(e.0))?,
+                )
             };
             slots.set_host(sink_op.outputs[0], value);
         }
@@ -690,5 +716,6 @@ fn element_to_host(column: &Column) -> HostValue {
 }
 
 /// The caches a context keeps across runs.
-pub type PipelineCache = Mutex<HashMap<String, Arc<(wgpu::ComputePipeline, wgpu::BindGroupLayout)>>>;
+pub type PipelineCache =
+    Mutex<HashMap<String, Arc<(wgpu::ComputePipeline, wgpu::BindGroupLayout)>>>;
 pub type SceneBufferCache = Mutex<HashMap<(&'static str, usize), (Arc<[u32]>, wgpu::Buffer)>>;

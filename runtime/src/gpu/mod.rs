@@ -6,10 +6,12 @@
 pub mod array;
 mod device;
 mod exec;
+mod functor_call;
 mod monoid;
 mod shader;
 mod stage;
 
 pub use array::GpuArray;
-pub use device::{GpuContext, GpuError, GpuLimits};
+pub use device::{gpu_for_tests, GpuContext, GpuError, GpuLimits};
 pub use exec::{run_plan_gpu, GpuRunContext};
+pub use functor_call::run_functor_gpu;

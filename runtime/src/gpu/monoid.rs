@@ -56,7 +56,10 @@ pub fn component(ty: ElemType) -> ElemType {
 /// The identity of `op` on `ty` as a WGSL expression (the CPU's identities).
 pub fn identity(op: MonoidOp, ty: ElemType) -> Result<String, String> {
     if !monoid_supports(op, ty) {
-        return Err(format!("`{}` is not defined on {ty:?} elements", op_name(op)));
+        return Err(format!(
+            "`{}` is not defined on {ty:?} elements",
+            op_name(op)
+        ));
     }
     let scalar = match (op, component(ty)) {
         (MonoidOp::Or, _) => "false",
@@ -80,21 +83,16 @@ pub fn identity(op: MonoidOp, ty: ElemType) -> Result<String, String> {
     })
 }
 
-/// Defines (once in `out`) and names `fn monoid_{op}_{ty}(a, b)`.
+/// Defines (once in `out`) and names `fn monoid_{op}_{ty}(a, b)`, with the
+/// same statements as the monoid functors' twins.
 pub fn combine_function(op: MonoidOp, ty: ElemType, out: &mut String) -> Result<String, String> {
     identity(op, ty)?;
     let name = format!("monoid_{}_{}", op_name(op), short(ty));
     if !out.contains(&format!("fn {name}(")) {
-        let expression = match op {
-            MonoidOp::Add => "a + b",
-            MonoidOp::Mul => "a * b",
-            MonoidOp::Min => "min(a, b)",
-            MonoidOp::Max => "max(a, b)",
-            MonoidOp::Or => "a || b",
-            MonoidOp::And => "a && b",
-        };
+        let statements = crate::generic::monoid_statements(op, ty)
+            .ok_or_else(|| format!("`{}` is not defined on {ty:?} elements", op_name(op)))?;
         let t = type_name(ty);
-        let _ = writeln!(out, "fn {name}(a: {t}, b: {t}) -> {t} {{ return {expression}; }}");
+        let _ = writeln!(out, "fn {name}(a: {t}, b: {t}) -> {t} {{ {statements} }}");
     }
     Ok(name)
 }

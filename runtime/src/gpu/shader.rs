@@ -204,7 +204,8 @@ impl<'r> ShaderBuilder<'r> {
         let ty = elem_type_wgsl(field.ty, self.records);
         match access {
             Access::Read | Access::ReadWrite => {
-                let load_word = dispatch(&|s| format!("return {name}_{s}[{index} * {words}u + j];"));
+                let load_word =
+                    dispatch(&|s| format!("return {name}_{s}[{index} * {words}u + j];"));
                 let _ = writeln!(
                     self.declarations,
                     "fn {name}_word(i: u32, j: u32) -> u32 {{\n    {load_word}\n}}"

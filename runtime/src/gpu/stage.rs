@@ -285,11 +285,12 @@ impl Generator<'_, '_, '_> {
                             )
                             .map_err(error)?;
                             let components: Vec<String> = match ty {
-                                ElemType::Vec2 | ElemType::Vec3 | ElemType::Vec4 => ["x", "y", "z", "w"]
-                                    [..super::array::words_of(ty)]
-                                    .iter()
-                                    .map(|c| format!("{name}_value.{c}"))
-                                    .collect(),
+                                ElemType::Vec2 | ElemType::Vec3 | ElemType::Vec4 => {
+                                    ["x", "y", "z", "w"][..super::array::words_of(ty)]
+                                        .iter()
+                                        .map(|c| format!("{name}_value.{c}"))
+                                        .collect()
+                                }
                                 _ => vec![format!("{name}_value")],
                             };
                             let _ = writeln!(
@@ -463,21 +464,23 @@ impl Generator<'_, '_, '_> {
                 resources: self.backend.resources,
             })
             .map_err(|e| error(e.0))?;
-        // The twin's failures, numbered by the backend.
+        // The twin's failures, numbered by the backend. Twins do not know the
+        // element index, so the failure reports only the code.
         let mut fail = format!("fn {function}_fail(code: u32) {{\n    switch code {{\n");
         for (local, message) in twin.failures.iter().enumerate() {
             let code = self.backend.failure(&format!("{}: {message}", op.label()));
-            let _ = writeln!(fail, "        case {local}u: {{ dpp_fail({code}u, 0u, i_of_fail); }}");
+            let _ = writeln!(
+                fail,
+                "        case {local}u: {{ dpp_fail({code}u, 0u, 0u); }}"
+            );
         }
         let unknown = self
             .backend
             .failure(&format!("{}: failure {{a}} without a message", op.label()));
         let _ = writeln!(
             fail,
-            "        default: {{ dpp_fail({unknown}u, code, i_of_fail); }}\n    }}\n}}"
+            "        default: {{ dpp_fail({unknown}u, code, 0u); }}\n    }}\n}}"
         );
-        // Failures carry no element index (twins do not know it): report 0.
-        let fail = fail.replace("i_of_fail", "0u");
         self.builder.functions.push_str(&fail);
         self.twins.push(twin);
         Ok(function)
