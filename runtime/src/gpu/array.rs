@@ -228,7 +228,7 @@ fn words_to_column(ty: ElemType, words: &[u32]) -> Column {
 }
 
 /// The column's words, as a field of its type stores them.
-fn column_words(column: &Column) -> Vec<u32> {
+pub(crate) fn column_words(column: &Column) -> Vec<u32> {
     match column {
         Column::Bool(v) => v.iter().map(|b| u32::from(*b)).collect(),
         Column::U32(v) => v.clone(),

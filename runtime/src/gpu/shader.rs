@@ -112,34 +112,37 @@ impl<'r> ShaderBuilder<'r> {
         format!("params[{}]", self.params.len() - 1)
     }
 
-    /// A host value as a WGSL expression of its WGSL type (`int` is `i32`).
-    pub fn param_host(&mut self, value: HostValue) -> String {
-        match value {
+    /// A host value as a WGSL expression of its WGSL type. Integers travel as
+    /// 32 bits (`i32`; values up to 2^32 - 1 keep their bits, so a `u32`
+    /// reading of them is exact); a wider one is an error, not a wrapped value.
+    pub fn param_host(&mut self, value: HostValue) -> Result<String, String> {
+        Ok(match value {
             HostValue::Bool(b) => format!("({} != 0u)", self.param_u32(u32::from(b))),
-            HostValue::Int(n) => format!("bitcast<i32>({})", self.param_u32(n as i32 as u32)),
+            HostValue::Int(n) => {
+                if !(i64::from(i32::MIN)..=i64::from(u32::MAX)).contains(&n) {
+                    return Err(format!(
+                        "{n} does not fit in the 32 bits the GPU backend passes integers in"
+                    ));
+                }
+                format!("bitcast<i32>({})", self.param_u32(n as u32))
+            }
             HostValue::Float(x) => {
                 format!("bitcast<f32>({})", self.param_u32((x as f32).to_bits()))
             }
             HostValue::Vec2(v) => self.param_floats("vec2<f32>", &v),
             HostValue::Vec3(v) => self.param_floats("vec3<f32>", &v),
             HostValue::Vec4(v) => self.param_floats("vec4<f32>", &v),
-        }
+        })
     }
 
-    /// A host value as an array element of type `ty` (a `fill`'s value).
-    pub fn param_element(&mut self, value: HostValue, ty: ElemType) -> String {
-        match (ty, value) {
-            (ElemType::U32, v) => self.param_u32(v.as_u32().unwrap_or_default()),
-            (ElemType::I32, v) => format!(
-                "bitcast<i32>({})",
-                self.param_u32(v.as_int().unwrap_or_default() as i32 as u32)
-            ),
-            (ElemType::F32, v) => format!(
-                "bitcast<f32>({})",
-                self.param_u32(v.as_f32().unwrap_or_default().to_bits())
-            ),
-            (_, v) => self.param_host(v),
-        }
+    /// A `fill`'s value as its array element, converted as the CPU converts it.
+    pub fn param_element(&mut self, value: HostValue) -> Result<String, String> {
+        let column = crate::column::Column::filled(value, 1)?;
+        let words: Vec<String> = super::array::column_words(&column)
+            .into_iter()
+            .map(|w| self.param_u32(w))
+            .collect();
+        Ok(words_to_value(column.elem_type(), &|j| words[j].clone()))
     }
 
     fn param_floats(&mut self, ty: &str, values: &[f32]) -> String {
@@ -213,7 +216,7 @@ impl<'r> ShaderBuilder<'r> {
                 let _ = writeln!(
                     self.declarations,
                     "fn {name}_load(i: u32) -> {ty} {{ return {}; }}",
-                    words_to_value(field.ty, &format!("{name}_word(i, "))
+                    words_to_value(field.ty, &|j| format!("{name}_word(i, {j}u)"))
                 );
                 if access == Access::ReadWrite {
                     let store_word =
@@ -312,14 +315,14 @@ impl<'r> ShaderBuilder<'r> {
     }
 }
 
-/// A WGSL expression of type `ty` from its words, `{word}j)` giving word `j`
-/// (`word` is a call prefix such as `f3_word(i, `).
-pub fn words_to_value(ty: ElemType, word: &str) -> String {
-    let float = |j: usize| format!("bitcast<f32>({word}{j}u))");
+/// A WGSL expression of type `ty` from its words, `word(j)` giving word `j`
+/// as a `u32` expression.
+pub fn words_to_value(ty: ElemType, word: &dyn Fn(usize) -> String) -> String {
+    let float = |j: usize| format!("bitcast<f32>({})", word(j));
     match ty {
-        ElemType::Bool => format!("({word}0u) != 0u)"),
-        ElemType::U32 => format!("{word}0u)"),
-        ElemType::I32 => format!("bitcast<i32>({word}0u))"),
+        ElemType::Bool => format!("({} != 0u)", word(0)),
+        ElemType::U32 => word(0),
+        ElemType::I32 => format!("bitcast<i32>({})", word(0)),
         ElemType::F32 => float(0),
         ElemType::Vec2 => format!("vec2<f32>({}, {})", float(0), float(1)),
         ElemType::Vec3 => format!("vec3<f32>({}, {}, {})", float(0), float(1), float(2)),

@@ -127,9 +127,8 @@ impl Generator<'_, '_, '_> {
             match &op.kind {
                 OpKind::Iota { .. } => self.bind(op.outputs[0], "i".into()),
                 OpKind::Fill { .. } => {
-                    let ty = call.elem_type(op.outputs[0]);
                     let value = values.fill.expect("fill value");
-                    let expression = self.builder.param_element(value, ty);
+                    let expression = self.builder.param_element(value).map_err(error)?;
                     self.bind(op.outputs[0], expression);
                 }
                 OpKind::Field { field } => {
@@ -167,9 +166,7 @@ impl Generator<'_, '_, '_> {
                     for input in &inputs {
                         arguments.push(self.expression(input));
                     }
-                    for named in &values.named {
-                        arguments.push(self.builder.param_host(*named));
-                    }
+                    self.named_arguments(op, values, &mut arguments)?;
                     self.bind(
                         op.outputs[0],
                         format!("{function}({})", arguments.join(", ")),
@@ -202,9 +199,7 @@ impl Generator<'_, '_, '_> {
                     );
                     let k = self.builder.param_u32(values.group as u32);
                     let mut arguments = vec![format!("i * {k}"), k];
-                    for named in &values.named {
-                        arguments.push(self.builder.param_host(*named));
-                    }
+                    self.named_arguments(op, values, &mut arguments)?;
                     self.bind(
                         op.outputs[0],
                         format!("{function}({})", arguments.join(", ")),
@@ -226,9 +221,7 @@ impl Generator<'_, '_, '_> {
                         format!("{name}_lane"),
                         k,
                     ];
-                    for named in &values.named {
-                        arguments.push(self.builder.param_host(*named));
-                    }
+                    self.named_arguments(op, values, &mut arguments)?;
                     self.bind(
                         op.outputs[0],
                         format!("{function}({})", arguments.join(", ")),
@@ -368,6 +361,23 @@ impl Generator<'_, '_, '_> {
             }
         }
         Ok(sink)
+    }
+
+    /// The op's named arguments as parameter words, in signature order.
+    fn named_arguments(
+        &mut self,
+        op: &Op,
+        values: &crate::interpret::OpHostValues,
+        arguments: &mut Vec<String>,
+    ) -> Result<(), RunError> {
+        for ((name, _), value) in op.named.iter().zip(&values.named) {
+            let expression = self
+                .builder
+                .param_host(*value)
+                .map_err(|e| error(format!("`{}` argument `{name}`: {e}", op.label())))?;
+            arguments.push(expression);
+        }
+        Ok(())
     }
 
     /// `var` as an array of the stage's length, for a sink kernel: the array
