@@ -196,10 +196,36 @@ impl Column {
 
     /// Concatenates same-typed columns in order (the CPU backend's way of joining chunks).
     pub fn concat(ty: ElemType, parts: &[Column], records: &RecordRegistry) -> Column {
-        let total = parts.iter().map(Column::len).sum();
+        let views: Vec<ColumnView<'_>> = parts.iter().map(Column::view).collect();
+        Column::concat_views(ty, &views, records)
+    }
+
+    /// [`Column::concat`] of borrowed parts; a record's fields are joined in
+    /// parallel (joining is a plain copy, bound by memory bandwidth).
+    pub fn concat_views(
+        ty: ElemType,
+        parts: &[ColumnView<'_>],
+        records: &RecordRegistry,
+    ) -> Column {
+        use rayon::prelude::*;
+        if let ElemType::Record(id) = ty {
+            let fields = records
+                .get(id)
+                .fields
+                .par_iter()
+                .enumerate()
+                .map(|(index, (_, field_ty))| {
+                    let field_parts: Vec<ColumnView<'_>> =
+                        parts.iter().map(|part| part.field(index).clone()).collect();
+                    Arc::new(Column::concat_views(*field_ty, &field_parts, records))
+                })
+                .collect();
+            return Column::Record { ty: id, fields };
+        }
+        let total = parts.iter().map(ColumnView::len).sum();
         let mut out = Column::with_capacity(ty, total, records);
         for part in parts {
-            out.extend_from_view(&part.view());
+            out.extend_from_view(part);
         }
         out
     }

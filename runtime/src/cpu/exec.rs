@@ -150,13 +150,25 @@ impl StageRun<'_, '_> {
         .into_iter()
         .collect::<Result<Vec<_>, RunError>>()?;
 
-        // Materialised values: the chunks joined in order.
-        for (position, var) in elementwise_materialised(stage).into_iter().enumerate() {
-            let parts: Vec<Column> = results
-                .iter()
-                .map(|r| Arc::unwrap_or_clone(r.materialised[position].clone()))
-                .collect();
-            let column = Column::concat(self.elem_type(var), &parts, &self.context.library.records);
+        // Materialised values: the chunks joined in order, variables in parallel.
+        let call = self.call;
+        let records = &self.context.library.records;
+        let variables = elementwise_materialised(stage);
+        let joined: Vec<Column> = {
+            use rayon::prelude::*;
+            variables
+                .par_iter()
+                .enumerate()
+                .map(|(position, var)| {
+                    let parts: Vec<ColumnView<'_>> = results
+                        .iter()
+                        .map(|r| r.materialised[position].view())
+                        .collect();
+                    Column::concat_views(call.elem_type(*var), &parts, records)
+                })
+                .collect()
+        };
+        for (var, column) in variables.into_iter().zip(joined) {
             self.slots.set_array(var, Arc::new(column));
         }
         if let Some(op) = stage.ops.last().filter(|op| is_sink(op)) {
