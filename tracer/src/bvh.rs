@@ -8,6 +8,13 @@
 //! [`Bvh::triangles`], which are stored in leaf order with their vertices copied
 //! (no index indirection in the hot loop). [`Bvh::triangle_ids`] maps a leaf-order
 //! position back to the triangle's index in the input file. The root is `nodes[0]`.
+//!
+//! The CPU does not traverse this layout in its hot path: [`Bvh::build`] also
+//! collapses it into an eight-wide tree (`bvh/wide.rs`, with SIMD box and triangle
+//! tests from `bvh/simd.rs`, AVX-512 or AVX2 chosen at run time, else portable
+//! code; batches of camera rays travel as packets, `bvh/wide/packet.rs`) that
+//! gives bit-identical answers. The binary traversal stays as the reference
+//! ([`Bvh::intersect_closest_binary`]), which the GPU shaders mirror.
 
 use crate::mesh::{MeshError, TriangleMesh};
 use bytemuck::{Pod, Zeroable};
@@ -16,6 +23,11 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::node::Bvh2Node;
 use obvhs::triangle::Triangle;
 use std::time::Duration;
+
+mod simd;
+mod wide;
+
+pub use wide::Isa;
 
 /// Entries in a traversal stack: the deepest chain of inner nodes a BVH may have.
 /// The GPU shaders need a fixed bound too; [`Bvh::build`] guarantees it.
@@ -79,6 +91,8 @@ pub struct Bvh {
     triangles: Vec<BvhTriangle>,
     triangle_ids: Vec<u32>,
     stack_depth: usize,
+    /// The CPU's traversal structure, built from the fields above.
+    wide: wide::WideBvh,
 }
 
 impl Bvh {
@@ -163,23 +177,97 @@ impl Bvh {
         self.stack_depth
     }
 
-    /// The closest hit with `0 < t < ray.tmax`, if any.
+    /// The closest hit with `0 < t < ray.tmax`, if any. Of triangles hit at exactly
+    /// the same distance, the one the binary traversal meets first wins.
     #[inline]
     pub fn intersect_closest(&self, ray: &Ray) -> Option<HitRecord> {
-        self.traverse::<false>(ray)
-            .map(|(leaf_triangle, t, u, v)| HitRecord {
-                t,
-                prim: self.triangle_ids[leaf_triangle],
-                u,
-                v,
-            })
+        self.intersect_closest_with(ray, Isa::detect())
     }
 
     /// Whether anything lies at `0 < t < tmax` (stops at the first hit found).
     #[inline]
     pub fn occluded(&self, ray: &Ray, tmax: f32) -> bool {
+        self.occluded_with(&Ray { tmax, ..*ray }, Isa::detect())
+    }
+
+    /// [`Bvh::intersect_closest`] of rays `ray(0) .. ray(count - 1)`, handing each
+    /// result to `sink` in order. Rays with `tmax` not above 0 miss without a
+    /// traversal. Runs of 16 rays (8 without AVX-512) with one origin and
+    /// direction octant travel as a packet: give camera rays in Morton order.
+    pub fn intersect_closest_batch(
+        &self,
+        count: usize,
+        ray: impl Fn(usize) -> Ray,
+        sink: impl FnMut(Option<HitRecord>),
+    ) {
+        self.intersect_closest_batch_with(Isa::detect(), count, ray, sink);
+    }
+
+    /// [`Bvh::occluded`] of rays `ray(0) .. ray(count - 1)`, each up to its own
+    /// `tmax`, results to `sink` in order (rays with `tmax` not above 0 are never
+    /// blocked).
+    pub fn occluded_batch(&self, count: usize, ray: impl Fn(usize) -> Ray, sink: impl FnMut(bool)) {
+        self.occluded_batch_with(Isa::detect(), count, ray, sink);
+    }
+
+    /// [`Bvh::intersect_closest_batch`] on a chosen implementation of the wide
+    /// traversal (panics if this CPU lacks it, see [`Isa::available`]).
+    pub fn intersect_closest_batch_with(
+        &self,
+        isa: Isa,
+        count: usize,
+        ray: impl Fn(usize) -> Ray,
+        mut sink: impl FnMut(Option<HitRecord>),
+    ) {
+        wide::trace_batch::<false>(self, isa, count, ray, |found| sink(self.hit_record(found)));
+    }
+
+    /// [`Bvh::occluded_batch`] on a chosen implementation.
+    pub fn occluded_batch_with(
+        &self,
+        isa: Isa,
+        count: usize,
+        ray: impl Fn(usize) -> Ray,
+        mut sink: impl FnMut(bool),
+    ) {
+        wide::trace_batch::<true>(self, isa, count, ray, |found| sink(found.is_some()));
+    }
+
+    /// [`Bvh::intersect_closest`] on a chosen implementation of the wide traversal
+    /// (panics if this CPU lacks it, see [`Isa::available`]).
+    pub fn intersect_closest_with(&self, ray: &Ray, isa: Isa) -> Option<HitRecord> {
+        let mut hit = None;
+        wide::trace_batch::<false>(self, isa, 1, |_| *ray, |found| hit = found);
+        self.hit_record(hit)
+    }
+
+    /// [`Bvh::occluded`] (up to `ray.tmax`) on a chosen implementation.
+    pub fn occluded_with(&self, ray: &Ray, isa: Isa) -> bool {
+        let mut blocked = false;
+        wide::trace_batch::<true>(self, isa, 1, |_| *ray, |found| blocked = found.is_some());
+        blocked
+    }
+
+    /// The reference: the closest hit by a scalar traversal of the binary layout
+    /// (what the GPU shaders do). [`Bvh::intersect_closest`] gives the same answer.
+    pub fn intersect_closest_binary(&self, ray: &Ray) -> Option<HitRecord> {
+        self.hit_record(self.traverse::<false>(ray))
+    }
+
+    /// The reference any-hit test on the binary layout.
+    pub fn occluded_binary(&self, ray: &Ray, tmax: f32) -> bool {
         let segment = Ray { tmax, ..*ray };
         self.traverse::<true>(&segment).is_some()
+    }
+
+    #[inline]
+    fn hit_record(&self, found: wide::Found) -> Option<HitRecord> {
+        found.map(|(leaf_triangle, t, u, v)| HitRecord {
+            t,
+            prim: self.triangle_ids[leaf_triangle],
+            u,
+            v,
+        })
     }
 
     /// Dispatches on the ray's dominant axis so that the triangle test's axis
@@ -284,6 +372,7 @@ const fn gamma(n: u32) -> f32 {
 }
 
 /// Per-ray values precomputed once for all box and triangle tests.
+#[derive(Clone, Copy)]
 struct PreparedRay {
     origin: [f32; 3],
     /// `1 / direction`: ±inf for zero components, handled in [`Self::entry_distance`].
@@ -399,6 +488,7 @@ fn flatten(source: &[Bvh2Node], primitive_indices: &[u32], mesh: &TriangleMesh) 
         triangles: Vec::with_capacity(primitive_indices.len()),
         triangle_ids: Vec::with_capacity(primitive_indices.len()),
         stack_depth: 1,
+        wide: wide::WideBvh::default(),
     };
     let append_leaf = |bvh: &mut Bvh, node: &Bvh2Node, first: u32, count: u32| {
         let index = bvh.triangles.len() as u32;
@@ -435,6 +525,7 @@ fn flatten(source: &[Bvh2Node], primitive_indices: &[u32], mesh: &TriangleMesh) 
         bvh.nodes.push(BvhNode {
             children: [left, right],
         });
+        bvh.wide = wide::WideBvh::build(&bvh.nodes, &bvh.triangles);
         return bvh;
     }
 
@@ -471,8 +562,14 @@ fn flatten(source: &[Bvh2Node], primitive_indices: &[u32], mesh: &TriangleMesh) 
         bvh.nodes[our_index] = BvhNode { children };
         work.extend(inner_children.into_iter().rev().flatten());
     }
+    // A deeper tree is discarded by `Bvh::build` (and could overflow the stacks).
+    if bvh.stack_depth <= MAX_STACK_DEPTH {
+        bvh.wide = wide::WideBvh::build(&bvh.nodes, &bvh.triangles);
+    }
     bvh
 }
+
+mod gpu;
 
 #[cfg(test)]
 mod tests;

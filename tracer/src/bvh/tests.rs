@@ -25,8 +25,31 @@ fn brute_force_hits(mesh: &TriangleMesh, ray: &Ray) -> Vec<(u32, f32)> {
         .collect()
 }
 
+/// The same hit, bit for bit (`t`, `u`, `v` compared as bits).
+fn same_hit(a: Option<HitRecord>, b: Option<HitRecord>) -> bool {
+    let bits =
+        |h: Option<HitRecord>| h.map(|h| (h.t.to_bits(), h.prim, h.u.to_bits(), h.v.to_bits()));
+    bits(a) == bits(b)
+}
+
+/// Every implementation of the wide traversal (SIMD and portable) gives exactly
+/// the binary traversal's answers, closest hit and any hit.
+fn check_against_binary(bvh: &Bvh, ray: &Ray) {
+    let reference = bvh.intersect_closest_binary(ray);
+    let blocked = bvh.occluded_binary(ray, ray.tmax);
+    for isa in Isa::available() {
+        let hit = bvh.intersect_closest_with(ray, isa);
+        assert!(
+            same_hit(hit, reference),
+            "{isa:?} {ray:?}: {hit:?} vs binary {reference:?}"
+        );
+        assert_eq!(bvh.occluded_with(ray, isa), blocked, "{isa:?} {ray:?}");
+    }
+}
+
 /// Checks closest hit and occlusion of one ray against brute force.
 fn check_against_brute_force(bvh: &Bvh, mesh: &TriangleMesh, ray: &Ray) {
+    check_against_binary(bvh, ray);
     let hits = brute_force_hits(mesh, ray);
     let closest = hits.iter().map(|&(_, t)| t).fold(f32::INFINITY, f32::min);
     match bvh.intersect_closest(ray) {
@@ -215,6 +238,7 @@ fn check_structure(bvh: &Bvh, mesh: &TriangleMesh) {
     }
     assert_eq!(visited, bvh.nodes().len());
     assert!(bvh.stack_depth() <= MAX_STACK_DEPTH);
+    bvh.wide.validate(bvh.triangles());
 }
 
 #[test]
@@ -481,4 +505,505 @@ fn watertight_test_agrees_with_moller_trumbore() {
         }
     }
     assert!(hits > 5000, "{hits}");
+}
+
+#[test]
+fn wide_traversal_matches_binary_on_random_rays() {
+    let mut random = SplitMix64::new(7);
+    let soup = random_soup(&mut random, 20000);
+    let scene = builtin_scene(32).unwrap();
+    for mesh in [&soup, &scene] {
+        let bvh = Bvh::build(mesh).unwrap();
+        let bounds = mesh.bounds().unwrap();
+        let rays: Vec<Ray> = (0..20000)
+            .map(|i| {
+                let origin =
+                    bounds.center() + random_point(&mut random, -0.8, 0.8) * bounds.diagonal();
+                let direction = if i % 4 == 0 {
+                    random_direction(&mut random)
+                } else {
+                    bounds.center() + random_point(&mut random, -0.5, 0.5) * bounds.diagonal()
+                        - origin
+                };
+                let tmax = match i % 5 {
+                    0 => random.range(0.0, 1.5),
+                    1 => -random.range(0.0, 1.0),
+                    _ => f32::INFINITY,
+                };
+                Ray {
+                    origin,
+                    direction,
+                    tmax,
+                }
+            })
+            .collect();
+        let mut hits = 0;
+        for ray in &rays {
+            check_against_binary(&bvh, ray);
+            hits += usize::from(bvh.intersect_closest_binary(ray).is_some());
+        }
+        assert!(hits > rays.len() / 8, "{hits}");
+        // The batch entry points agree with the single-ray ones, in order.
+        for isa in Isa::available() {
+            let mut index = 0;
+            bvh.intersect_closest_batch_with(
+                isa,
+                rays.len(),
+                |i| rays[i],
+                |hit| {
+                    let ray = &rays[index];
+                    let expected = if ray.tmax > 0.0 {
+                        bvh.intersect_closest_binary(ray)
+                    } else {
+                        None
+                    };
+                    assert!(same_hit(hit, expected), "{isa:?} {ray:?}");
+                    index += 1;
+                },
+            );
+            assert_eq!(index, rays.len());
+            let mut index = 0;
+            bvh.occluded_batch_with(
+                isa,
+                rays.len(),
+                |i| rays[i],
+                |blocked| {
+                    let ray = &rays[index];
+                    assert_eq!(
+                        blocked,
+                        ray.tmax > 0.0 && bvh.occluded_binary(ray, ray.tmax)
+                    );
+                    index += 1;
+                },
+            );
+            assert_eq!(index, rays.len());
+        }
+    }
+}
+
+/// Rays through the grid's vertices and edges hit two to six coplanar triangles at
+/// the same distance: ties between leaves are decided as the binary traversal does.
+#[test]
+fn exact_ties_resolve_like_the_binary_traversal() {
+    let mesh = grid(64);
+    let bvh = Bvh::build(&mesh).unwrap();
+    let mut random = SplitMix64::new(8);
+    let mut distinct = std::collections::HashSet::new();
+    for _ in 0..20000 {
+        let target = Vec3::new(
+            (random.next_u64() % 129) as f32 * 0.5,
+            (random.next_u64() % 129) as f32 * 0.5,
+            0.0,
+        );
+        let origin = target + Vec3::new(0.0, 0.0, 8.0) + random_point(&mut random, -6.0, 6.0);
+        let ray = Ray {
+            origin,
+            direction: target - origin,
+            tmax: f32::INFINITY,
+        };
+        check_against_binary(&bvh, &ray);
+        if let Some(hit) = bvh.intersect_closest(&ray) {
+            distinct.insert(hit.prim);
+        }
+    }
+    assert!(distinct.len() > 1000, "{}", distinct.len());
+}
+
+#[test]
+fn lanes_agree_bit_for_bit() {
+    use super::simd::{Lanes, Portable};
+    let specials = [
+        0.0,
+        -0.0,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+        1.0,
+        -1.0,
+        f32::MIN_POSITIVE * 0.5,
+    ];
+    let mut random = SplitMix64::new(9);
+    let row = |random: &mut SplitMix64| -> [f32; 16] {
+        std::array::from_fn(|_| match random.next_u64() % 4 {
+            0 => specials[(random.next_u64() % specials.len() as u64) as usize],
+            _ => random.range(-4.0, 4.0),
+        })
+    };
+    /// Every operation on rows `a` and `b`, `S::N` lanes at a time: results as
+    /// bits, and the compare masks.
+    fn ops<S: Lanes>(s: S, a: &[f32; 16], b: &[f32; 16]) -> (Vec<[u32; 16]>, Vec<u32>) {
+        let mut values = vec![[0u32; 16]; 7];
+        let mut masks = vec![0u32; 4];
+        for offset in (0..16).step_by(S::N) {
+            let (x, y) = (s.load_at(a, offset), s.load_at(b, offset));
+            let results = [
+                s.add(x, y),
+                s.sub(x, y),
+                s.mul(x, y),
+                s.div(x, y),
+                s.max_or_second(x, y),
+                s.min_or_second(x, y),
+                s.splat(a[3]),
+            ];
+            for (value, result) in values.iter_mut().zip(results) {
+                let mut out = [0.0; 16];
+                s.store_at(result, &mut out, offset);
+                for lane in offset..offset + S::N {
+                    value[lane] = out[lane].to_bits();
+                }
+            }
+            for (mask, bits) in
+                masks
+                    .iter_mut()
+                    .zip([s.lt(x, y), s.le(x, y), s.gt(x, y), s.eq(x, y)])
+            {
+                *mask |= bits << offset;
+            }
+        }
+        (values, masks)
+    }
+    for _ in 0..10000 {
+        let (a, b) = (row(&mut random), row(&mut random));
+        let reference = ops(Portable, &a, &b);
+        // The reference itself is the scalar code.
+        for lane in 0..16 {
+            let max = if a[lane] > b[lane] { a[lane] } else { b[lane] };
+            assert_eq!(reference.0[4][lane], max.to_bits());
+            assert_eq!(reference.1[0] >> lane & 1 == 1, a[lane] < b[lane]);
+        }
+        #[cfg(target_arch = "x86_64")]
+        {
+            if let Some(avx2) = super::simd::Avx2::detect() {
+                assert_eq!(ops(avx2, &a, &b), reference, "{a:?} {b:?}");
+            }
+            if let Some(avx512) = super::simd::Avx512::detect() {
+                assert_eq!(ops(avx512, &a, &b), reference, "{a:?} {b:?}");
+                assert_eq!(ops(avx512.x16(), &a, &b), reference, "{a:?} {b:?}");
+            }
+        }
+    }
+}
+
+/// A camera's primary rays in Morton order, as `cameraRay` makes them.
+fn camera_rays(
+    mesh: &TriangleMesh,
+    view: crate::camera::StandardView,
+    size: (u32, u32),
+) -> Vec<Ray> {
+    use crate::camera::{Camera, CameraSetup};
+    let (width, height) = size;
+    let camera = Camera::standard(view, &mesh.bounds().unwrap(), width, height).unwrap();
+    let setup = CameraSetup::new(camera);
+    setup
+        .morton_pixels
+        .iter()
+        .map(|&pixel| Ray {
+            origin: setup.camera.eye,
+            direction: setup
+                .camera
+                .direction(pixel % width, pixel / width, 0.5, 0.5),
+            tmax: f32::INFINITY,
+        })
+        .collect()
+}
+
+/// The batch entry point against the binary traversal, in order, on every
+/// implementation (closest hits through packets where the rays allow).
+fn check_batch_against_binary(bvh: &Bvh, rays: &[Ray]) {
+    let expected: Vec<_> = rays
+        .iter()
+        .map(|ray| {
+            if ray.tmax > 0.0 {
+                bvh.intersect_closest_binary(ray)
+            } else {
+                None
+            }
+        })
+        .collect();
+    for isa in Isa::available() {
+        let mut got = Vec::with_capacity(rays.len());
+        bvh.intersect_closest_batch_with(isa, rays.len(), |i| rays[i], |hit| got.push(hit));
+        assert_eq!(got.len(), rays.len());
+        for (i, (a, b)) in got.iter().zip(&expected).enumerate() {
+            assert!(
+                same_hit(*a, *b),
+                "{isa:?} ray {i} {:?}: {a:?} vs binary {b:?}",
+                rays[i]
+            );
+        }
+    }
+}
+
+#[test]
+fn packets_of_camera_rays_match_binary() {
+    use crate::camera::StandardView;
+    let mesh = builtin_scene(48).unwrap();
+    let bvh = Bvh::build(&mesh).unwrap();
+    for view in [StandardView::Front, StandardView::Back] {
+        let rays = camera_rays(&mesh, view, (160, 120));
+        check_batch_against_binary(&bvh, &rays);
+        let hits = rays
+            .iter()
+            .filter(|r| bvh.intersect_closest_binary(r).is_some())
+            .count();
+        assert!(hits > rays.len() / 5, "{hits}");
+    }
+    // Broken packets: a dead ray, a ray from elsewhere, a ray of another octant,
+    // short segments, and a count that is no multiple of the packet size.
+    let mut rays = camera_rays(&mesh, StandardView::Front, (64, 48));
+    rays[3].tmax = 0.0;
+    rays[20].origin.x += 1e-3;
+    rays[40].direction = -rays[40].direction;
+    for ray in rays.iter_mut().skip(64).take(16) {
+        ray.tmax = 2.0;
+    }
+    rays.truncate(rays.len() - 5);
+    check_batch_against_binary(&bvh, &rays);
+}
+
+/// Packets of rays from one point through the grid's vertices and edges: exact
+/// ties between coplanar triangles, decided as the binary traversal does.
+#[test]
+fn packets_resolve_exact_ties_like_the_binary_traversal() {
+    let mesh = grid(64);
+    let bvh = Bvh::build(&mesh).unwrap();
+    let mut rays = Vec::new();
+    for eye in [Vec3::new(20.3, 40.7, 9.0), Vec3::new(33.0, 31.0, 3.0)] {
+        // 4 x 4 tiles of targets half a cell apart, tile after tile.
+        for tile in 0..(64 * 64 / 16) {
+            let (tx, ty) = ((tile % 32) as f32 * 2.0, (tile / 32) as f32 * 2.0);
+            for i in 0..16 {
+                let target = Vec3::new(tx + (i % 4) as f32 * 0.5, ty + (i / 4) as f32 * 0.5, 0.0);
+                rays.push(Ray {
+                    origin: eye,
+                    direction: target - eye,
+                    tmax: f32::INFINITY,
+                });
+            }
+        }
+    }
+    check_batch_against_binary(&bvh, &rays);
+}
+
+#[test]
+fn isa_detection() {
+    let available = Isa::available();
+    assert_eq!(available[0], Isa::detect());
+    assert_eq!(available.last(), Some(&Isa::Portable));
+}
+
+/// A closed cube of `6 n²` unit squares on integer coordinates `0..=n` (shared
+/// vertices, outward winding), so that points on its edges are exact in f32.
+fn subdivided_cube(n: u32) -> TriangleMesh {
+    let mut index_of = std::collections::HashMap::new();
+    let mut positions = Vec::new();
+    let mut vertex = |p: [u32; 3]| {
+        *index_of.entry(p).or_insert_with(|| {
+            positions.push(Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32));
+            positions.len() as u32 - 1
+        })
+    };
+    let mut triangles = Vec::new();
+    for axis in 0..3 {
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        for side in [0, n] {
+            for i in 0..n {
+                for j in 0..n {
+                    let mut corner = |di: u32, dj: u32| {
+                        let mut p = [0; 3];
+                        p[axis] = side;
+                        p[u] = i + di;
+                        p[v] = j + dj;
+                        vertex(p)
+                    };
+                    let [a, b, c, d] = [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)];
+                    if side == n {
+                        triangles.extend([[a, b, c], [a, c, d]]);
+                    } else {
+                        triangles.extend([[a, c, b], [a, d, c]]);
+                    }
+                }
+            }
+        }
+    }
+    TriangleMesh {
+        positions,
+        triangles,
+        normals: None,
+        scalars: None,
+    }
+}
+
+/// Targets on a mesh's vertices and edges: the vertices, and points a quarter,
+/// a third and half way along every edge.
+fn vertex_and_edge_targets(mesh: &TriangleMesh) -> Vec<Vec3> {
+    let mut targets = mesh.positions.clone();
+    let mut edges = std::collections::HashSet::new();
+    for &[a, b, c] in &mesh.triangles {
+        for (p, q) in [(a, b), (b, c), (c, a)] {
+            edges.insert((p.min(q), p.max(q)));
+        }
+    }
+    let mut edges: Vec<_> = edges.into_iter().collect();
+    edges.sort_unstable();
+    for (p, q) in edges {
+        let (p, q) = (mesh.positions[p as usize], mesh.positions[q as usize]);
+        for s in [0.25, 1.0 / 3.0, 0.5] {
+            targets.push(p + s * (q - p));
+        }
+    }
+    targets
+}
+
+/// Watertightness through the fast paths: a million rays from outside two closed
+/// meshes, aimed exactly at vertices and edges (close enough to the outward
+/// direction that none only grazes a convex corner), must all hit the surface no
+/// later than their target, as closest hits and as any-hit rays; rays from inside
+/// must never escape.
+#[test]
+fn a_million_rays_at_vertices_and_edges_never_leak() {
+    let sphere = icosphere(4);
+    let cube = subdivided_cube(24);
+    let mut random = SplitMix64::new(10);
+    let mut total = 0;
+    // Tilts keep rays within 30 (sphere) and 20 (cube) degrees of the outward
+    // direction, away from grazing convex vertices and edges.
+    for (mesh, rays_per_target, max_tilt) in [(&sphere, 20, 0.5), (&cube, 16, 0.35)] {
+        let is_sphere = std::ptr::eq(mesh, &sphere);
+        let bvh = Bvh::build(mesh).unwrap();
+        let bounds = mesh.bounds().unwrap();
+        let center = bounds.center();
+        let radius = bounds.diagonal();
+        let targets = vertex_and_edge_targets(mesh);
+        let mut outside = Vec::with_capacity(targets.len() * rays_per_target);
+        let mut inside = Vec::with_capacity(targets.len());
+        for &target in &targets {
+            // For the cube, "outward" is the face normal; at its edges and corners,
+            // the sum of the faces' normals.
+            // The sphere's outward direction; the cube's face normal (at its edges
+            // and corners, the sum of the faces' normals).
+            let outward = if is_sphere {
+                target.normalize()
+            } else {
+                let side = |x: f32, low: f32, high: f32| {
+                    if x == low {
+                        -1.0
+                    } else if x == high {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                };
+                Vec3::new(
+                    side(target.x, bounds.min.x, bounds.max.x),
+                    side(target.y, bounds.min.y, bounds.max.y),
+                    side(target.z, bounds.min.z, bounds.max.z),
+                )
+                .normalize()
+            };
+            for _ in 0..rays_per_target {
+                let tilt = max_tilt * random_point(&mut random, -1.0, 1.0).normalize();
+                let origin =
+                    target + random.range(0.5, 2.0) * radius * (outward + tilt).normalize();
+                outside.push(Ray {
+                    origin,
+                    direction: target - origin,
+                    tmax: f32::INFINITY,
+                });
+            }
+            let origin = center + random_point(&mut random, -0.1, 0.1) * radius;
+            inside.push(Ray {
+                origin,
+                direction: target - origin,
+                tmax: f32::INFINITY,
+            });
+        }
+        total += outside.len();
+        let mut index = 0;
+        bvh.intersect_closest_batch(
+            outside.len(),
+            |i| outside[i],
+            |hit| {
+                // The first hit is on the surface no later than the target (t = 1).
+                assert!(
+                    hit.is_some_and(|h| h.t <= 1.0 + 1e-5),
+                    "leak: {:?} {hit:?}",
+                    outside[index]
+                );
+                index += 1;
+            },
+        );
+        // Any hit before just past the target.
+        let mut index = 0;
+        bvh.occluded_batch(
+            outside.len(),
+            |i| Ray {
+                tmax: 1.0 + 1e-5,
+                ..outside[i]
+            },
+            |blocked| {
+                assert!(blocked, "any-hit leak: {:?}", outside[index]);
+                index += 1;
+            },
+        );
+        let mut index = 0;
+        bvh.intersect_closest_batch(
+            inside.len(),
+            |i| inside[i],
+            |hit| {
+                assert!(hit.is_some(), "escape: {:?}", inside[index]);
+                index += 1;
+            },
+        );
+        bvh.occluded_batch(inside.len(), |i| inside[i], |blocked| assert!(blocked));
+        // The other implementations (and the reference) on a sample of the rays.
+        for ray in outside.iter().step_by(97) {
+            check_against_binary(&bvh, ray);
+        }
+        // Packets: from eyes outside, every target that faces the eye, in runs of
+        // one octant so that most of them travel as packets.
+        for eye in [Vec3::X, Vec3::NEG_Y, Vec3::Z, Vec3::new(-1.0, 0.5, -0.7)] {
+            let eye = center + 1.5 * radius * eye.normalize();
+            let mut rays: Vec<Ray> = targets
+                .iter()
+                .filter(|&&target| {
+                    let outward = if is_sphere {
+                        target.normalize()
+                    } else {
+                        (target - center).normalize()
+                    };
+                    outward.dot((eye - target).normalize()) > 0.5
+                })
+                .map(|&target| Ray {
+                    origin: eye,
+                    direction: target - eye,
+                    tmax: f32::INFINITY,
+                })
+                .collect();
+            rays.sort_by_key(|ray| {
+                let d = ray.direction;
+                (
+                    d.x < 0.0,
+                    d.y < 0.0,
+                    d.z < 0.0,
+                    (d.x.abs() >= d.y.abs()) as u8,
+                )
+            });
+            total += rays.len();
+            let mut index = 0;
+            bvh.intersect_closest_batch(
+                rays.len(),
+                |i| rays[i],
+                |hit| {
+                    assert!(
+                        hit.is_some_and(|h| h.t <= 1.0 + 1e-5),
+                        "packet leak: {:?} {hit:?}",
+                        rays[index]
+                    );
+                    index += 1;
+                },
+            );
+        }
+    }
+    assert!(total >= 1_000_000, "{total}");
 }

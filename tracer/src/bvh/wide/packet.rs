@@ -1,0 +1,321 @@
+//! Packet traversal of the wide tree for coherent rays (a camera's primary rays:
+//! one origin, neighbouring directions, handed over by the Morton order in tiles
+//! of 16). One ray per lane: each child box is tested against the whole packet at
+//! once, and each triangle too, so the rays share a node's memory traffic and
+//! control flow. Where few rays of the packet remain in a subtree, they finish it
+//! one by one with the single-ray walk, which tests eight boxes or sixteen
+//! triangles at once instead.
+//!
+//! Each lane does the scalar tests' IEEE operations on its own ray, so distances,
+//! culling and hits per ray are exactly those of the single-ray traversal; ties
+//! are retraced by the binary traversal as there.
+
+use super::super::simd::{Lanes, Lanes8, LanesExt};
+use super::{
+    planes, retrace_tie, walk, watertight, Bvh, Found, PreparedRay, Ray, Stack, Walk, LEAF, NO_HIT,
+    ROBUST_FAR_SCALE, STACK_ENTRIES, WIDTH,
+};
+
+/// The widest packet (AVX-512: 16 rays).
+pub(super) const MAX_PACKET: usize = 16;
+
+/// A subtree that at most a quarter of a packet's rays enter is finished by
+/// single-ray walks (measured: 3 to 5 of 16 are about equally good).
+fn single_rays_below<T: Lanes>() -> u32 {
+    (T::N / 4) as u32
+}
+
+/// Nodes still to visit: the node, the rays that entered its box, and their entry
+/// distances (a ray is dropped on pop if it has found a closer hit since).
+pub(super) struct PacketStack {
+    entries: Vec<(u32, u32)>,
+    t_entry: Vec<[f32; MAX_PACKET]>,
+}
+
+impl PacketStack {
+    pub(super) fn new() -> PacketStack {
+        PacketStack {
+            entries: vec![(0, 0); STACK_ENTRIES],
+            t_entry: vec![[0.0; MAX_PACKET]; STACK_ENTRIES],
+        }
+    }
+}
+
+/// The case of `trace`'s dispatch (dominant axis) and the signs of a ray's
+/// direction: rays with equal keys and origins can travel together.
+#[inline(always)]
+fn packet_key(ray: &Ray) -> u32 {
+    let d = ray.direction.abs();
+    let axis = if d.x >= d.y && d.x >= d.z {
+        0
+    } else if d.y >= d.z {
+        1
+    } else {
+        2
+    };
+    let [x, y, z] = ray.direction.to_array().map(f32::is_sign_negative);
+    axis | u32::from(x) << 2 | u32::from(y) << 3 | u32::from(z) << 4
+}
+
+/// Whether `rays` can travel as a packet: all alive, one origin, one key.
+#[inline(always)]
+pub(super) fn is_packet(rays: &[Ray]) -> bool {
+    let key = packet_key(&rays[0]);
+    let origin = rays[0].origin.to_array().map(f32::to_bits);
+    rays.iter().all(|ray| {
+        ray.tmax > 0.0
+            && ray.origin.to_array().map(f32::to_bits) == origin
+            && packet_key(ray) == key
+    })
+}
+
+/// Traces `T::N` rays that pass [`is_packet`], each result to `found`.
+#[inline(always)]
+pub(super) fn trace_packet<S: Lanes8, T: Lanes>(
+    boxes: S,
+    lanes: T,
+    bvh: &Bvh,
+    rays: &[Ray],
+    stack: &mut PacketStack,
+    single_stack: &mut Stack,
+    found: &mut [Found; MAX_PACKET],
+) {
+    match packet_key(&rays[0]) & 3 {
+        0 => traverse_packet::<S, T, 1, 2, 0>(boxes, lanes, bvh, rays, stack, single_stack, found),
+        1 => traverse_packet::<S, T, 2, 0, 1>(boxes, lanes, bvh, rays, stack, single_stack, found),
+        _ => traverse_packet::<S, T, 0, 1, 2>(boxes, lanes, bvh, rays, stack, single_stack, found),
+    }
+}
+
+#[inline(always)]
+fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const KZ: usize>(
+    boxes: S,
+    lanes: T,
+    bvh: &Bvh,
+    rays: &[Ray],
+    stack: &mut PacketStack,
+    single_stack: &mut Stack,
+    found: &mut [Found; MAX_PACKET],
+) {
+    let n = T::N;
+    // The packet's constants, as `PreparedRay::new` computes them per ray.
+    let mut rows = [[0.0f32; MAX_PACKET]; 7];
+    for (lane, ray) in rays.iter().enumerate() {
+        for axis in 0..3 {
+            rows[axis][lane] = ray.origin[axis];
+            rows[3 + axis][lane] = ray.direction[axis];
+        }
+        rows[6][lane] = ray.tmax;
+    }
+    let origin = [
+        lanes.load_row(&rows[0]),
+        lanes.load_row(&rows[1]),
+        lanes.load_row(&rows[2]),
+    ];
+    let direction = [
+        lanes.load_row(&rows[3]),
+        lanes.load_row(&rows[4]),
+        lanes.load_row(&rows[5]),
+    ];
+    let one = lanes.splat(1.0);
+    let inverse_direction = [
+        lanes.div(one, direction[0]),
+        lanes.div(one, direction[1]),
+        lanes.div(one, direction[2]),
+    ];
+    let shear = [
+        lanes.div(direction[KX], direction[KZ]),
+        lanes.div(direction[KY], direction[KZ]),
+        lanes.div(one, direction[KZ]),
+    ];
+    // The packet's rays share their direction signs.
+    let [near_plane, far_plane] = planes(rays[0].direction.to_array().map(f32::is_sign_negative));
+
+    let mut closest = lanes.load_row(&rows[6]);
+    let zero = lanes.splat(0.0);
+    // The best hits' barycentrics.
+    let (mut hit_u, mut hit_v) = (zero, zero);
+    let mut best = [NO_HIT; MAX_PACKET];
+    // Rays with another triangle hit at exactly `closest` (decided at the end).
+    let mut tied = 0u32;
+    let scale = lanes.splat(ROBUST_FAR_SCALE);
+    let infinity = lanes.splat(f32::INFINITY);
+
+    let wide = &bvh.wide;
+    let mut stack_len = 0usize;
+    let mut current = 0u32;
+    let mut active = (1u32 << n) - 1;
+    'visit: loop {
+        if active.count_ones() <= single_rays_below::<T>() {
+            // Few rays left here: each finishes this subtree on its own.
+            let mut closest_row = lanes.store_row(closest);
+            let mut u_row = lanes.store_row(hit_u);
+            let mut v_row = lanes.store_row(hit_v);
+            let mut remaining = active;
+            while remaining != 0 {
+                let lane = remaining.trailing_zeros() as usize;
+                remaining &= remaining - 1;
+                let start = Walk {
+                    best: best[lane],
+                    closest: closest_row[lane],
+                    u: u_row[lane],
+                    v: v_row[lane],
+                    tied: tied & (1 << lane) != 0,
+                };
+                let prepared = PreparedRay::new::<KX, KY, KZ>(&rays[lane]);
+                let end = walk::<S, T, KX, KY, KZ, false>(
+                    boxes,
+                    lanes,
+                    bvh,
+                    &prepared,
+                    current,
+                    start,
+                    single_stack,
+                );
+                best[lane] = end.best;
+                closest_row[lane] = end.closest;
+                u_row[lane] = end.u;
+                v_row[lane] = end.v;
+                tied = (tied & !(1 << lane)) | (u32::from(end.tied) << lane);
+            }
+            closest = lanes.load_row(&closest_row);
+            hit_u = lanes.load_row(&u_row);
+            hit_v = lanes.load_row(&v_row);
+        } else if current & LEAF == 0 {
+            let node = &wide.nodes[current as usize];
+            let mut entered = [(0u32, 0u32, 0.0f32); WIDTH];
+            let mut t_entry = [[0.0f32; MAX_PACKET]; WIDTH];
+            let mut count = 0;
+            let mut children = node.valid;
+            while children != 0 {
+                let child = children.trailing_zeros() as usize;
+                children &= children - 1;
+                let mut t_enter = zero;
+                let mut t_exit = closest;
+                for axis in 0..3 {
+                    let near = lanes.splat(node.planes[near_plane[axis]][child]);
+                    let far = lanes.splat(node.planes[far_plane[axis]][child]);
+                    let t_near = lanes.mul(lanes.sub(near, origin[axis]), inverse_direction[axis]);
+                    let t_far = lanes.mul(lanes.sub(far, origin[axis]), inverse_direction[axis]);
+                    // NaN leaves the accumulators unchanged, as in the scalar test.
+                    t_enter = lanes.max_or_second(t_near, t_enter);
+                    t_exit = lanes.min_or_second(t_far, t_exit);
+                }
+                let rays_in = lanes.le(t_enter, lanes.mul(t_exit, scale))
+                    & lanes.lt(t_enter, infinity)
+                    & active;
+                if rays_in != 0 {
+                    lanes.store_at(t_enter, &mut t_entry[count], 0);
+                    // Ordered by the entry distance of the first ray in.
+                    let key = t_entry[count][rays_in.trailing_zeros() as usize];
+                    entered[count] = (node.children[child], rays_in, key);
+                    count += 1;
+                }
+            }
+            if count > 0 {
+                // Nearest last on the stack, so taken first (insertion sort).
+                let mut order = [0usize; WIDTH];
+                for i in 0..count {
+                    let mut slot = i;
+                    while slot > 0 && entered[order[slot - 1]].2 < entered[i].2 {
+                        order[slot] = order[slot - 1];
+                        slot -= 1;
+                    }
+                    order[slot] = i;
+                }
+                for &i in &order[..count - 1] {
+                    stack.entries[stack_len] = (entered[i].0, entered[i].1);
+                    stack.t_entry[stack_len] = t_entry[i];
+                    stack_len += 1;
+                }
+                let nearest = order[count - 1];
+                current = entered[nearest].0;
+                active = entered[nearest].1;
+                continue 'visit;
+            }
+        } else {
+            let mut group_index = (current & !LEAF) as usize;
+            loop {
+                let group = &wide.groups[group_index];
+                let mut triangles = group.valid;
+                while triangles != 0 {
+                    let lane = triangles.trailing_zeros() as usize;
+                    triangles &= triangles - 1;
+                    let mut vertices = [[zero; 3]; 3];
+                    for (k, vertex) in vertices.iter_mut().enumerate() {
+                        for (axis, coordinate) in vertex.iter_mut().enumerate() {
+                            *coordinate = lanes.splat(group.v[k][axis][lane]);
+                        }
+                    }
+                    let crossing =
+                        watertight::<T, KX, KY, KZ>(lanes, vertices, &origin, &shear, active);
+                    let hits = crossing.hits & lanes.le(crossing.t, closest);
+                    if hits == 0 {
+                        continue;
+                    }
+                    let closer = hits & lanes.lt(crossing.t, closest);
+                    let mut had_hit = 0;
+                    let mut updated = hits;
+                    while updated != 0 {
+                        let ray = updated.trailing_zeros() as usize;
+                        updated &= updated - 1;
+                        had_hit |= u32::from(best[ray] != NO_HIT) << ray;
+                        if closer & (1 << ray) != 0 {
+                            best[ray] = group.first + lane as u32;
+                        }
+                    }
+                    // Equal to a hit found before: decided at the end.
+                    tied = (tied & !closer) | (hits & !closer & had_hit);
+                    if closer != 0 {
+                        closest = lanes.select(closer, crossing.t, closest);
+                        let (u, v) = crossing.barycentrics(lanes);
+                        hit_u = lanes.select(closer, u, hit_u);
+                        hit_v = lanes.select(closer, v, hit_v);
+                    }
+                }
+                if group.last {
+                    break;
+                }
+                group_index += 1;
+            }
+        }
+        let limit = lanes.mul(closest, scale);
+        loop {
+            if stack_len == 0 {
+                break 'visit;
+            }
+            stack_len -= 1;
+            let (node, rays_in) = stack.entries[stack_len];
+            let t_entry = lanes.load_row(&stack.t_entry[stack_len]);
+            let still = rays_in & lanes.le(t_entry, limit);
+            if still != 0 {
+                current = node;
+                active = still;
+                continue 'visit;
+            }
+        }
+    }
+
+    let closest = lanes.store_row(closest);
+    let (u, v) = (lanes.store_row(hit_u), lanes.store_row(hit_v));
+    for (lane, (ray, result)) in rays.iter().zip(found.iter_mut()).enumerate() {
+        *result = if best[lane] == NO_HIT {
+            None
+        } else if tied & (1 << lane) != 0 {
+            retrace_tie::<KX, KY, KZ>(
+                bvh,
+                ray.origin.to_array(),
+                ray.direction.to_array(),
+                ray.tmax,
+            )
+        } else {
+            let index = best[lane] as usize;
+            debug_assert_eq!(
+                PreparedRay::new::<KX, KY, KZ>(ray)
+                    .intersect_triangle::<KX, KY, KZ>(&bvh.triangles[index], f32::INFINITY),
+                Some((closest[lane], u[lane], v[lane]))
+            );
+            Some((index, closest[lane], u[lane], v[lane]))
+        };
+    }
+}
