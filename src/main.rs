@@ -3,6 +3,7 @@
 //! Exit status (spec §4): 0 on success, 2 on input errors (a malformed
 //! pipeline, bad arguments, an unreadable scene), 1 on run-time failures.
 
+mod bench;
 mod colorbar;
 mod outputs;
 mod scene_setup;
@@ -11,6 +12,7 @@ mod volume_setup;
 use clap::{Parser, Subcommand, ValueEnum};
 use dpp_runtime::compile::plan_text::plan_to_text;
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext, StageTiming};
+use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{compile_file, CompileOptions, FunctorLibrary, Plan};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -44,6 +46,8 @@ enum Command {
     Gen(GenArgs),
     /// Extract an isosurface of a volume (with pipelines/isosurface.dpp) as a mesh.
     Iso(IsoArgs),
+    /// Measure the workloads as the paper did (views, warm-up and measured rounds, fused and unfused).
+    Bench(Box<bench::BenchArgs>),
 }
 
 #[derive(clap::Args)]
@@ -172,6 +176,8 @@ struct RunArgs {
 enum Backend {
     /// rayon on every core.
     Cpu,
+    /// wgpu on the first adapter found (`WGPU_BACKEND=vulkan|metal|dx12|gl` chooses).
+    Gpu,
 }
 
 #[derive(clap::Args)]
@@ -206,6 +212,7 @@ fn main() -> ExitCode {
         Command::Check { files } => check(&files, &library),
         Command::Gen(args) => generate(args),
         Command::Iso(args) => iso(args, &library),
+        Command::Bench(args) => bench::bench(*args, &library),
         Command::Functors => {
             print!("{}", functor_listing(&library));
             Ok(())
@@ -302,7 +309,6 @@ fn functor_listing(library: &FunctorLibrary) -> String {
 }
 
 fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
-    let Backend::Cpu = args.backend;
     let plan = compile(&args.pipeline, library, &args.compile.options())?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0))
@@ -338,17 +344,38 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     .map_err(Failure::Input)?;
     let setup_time = setup_start.elapsed();
 
-    let context = RunContext {
-        library,
-        uniforms: &setup.uniforms,
-        resources: &setup.resources,
-        chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
+    let mut description = setup.description.clone();
+    let (result, run_time) = match args.backend {
+        Backend::Cpu => {
+            let context = RunContext {
+                library,
+                uniforms: &setup.uniforms,
+                resources: &setup.resources,
+                chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
+            };
+            let run_start = Instant::now();
+            let result = pool
+                .install(|| run_plan(&plan, &context))
+                .map_err(|e| Failure::Run(e.to_string()))?;
+            (result, run_start.elapsed())
+        }
+        Backend::Gpu => {
+            let gpu = GpuContext::new().map_err(|e| Failure::Run(format!("error: {e}")))?;
+            description.push_str(&format!("\nGPU: {}", gpu.adapter_name()));
+            let context = GpuRunContext {
+                gpu: &gpu,
+                library,
+                uniforms: &setup.uniforms,
+                resources: &setup.resources,
+                profile: args.profile,
+            };
+            let run_start = Instant::now();
+            let result = pool
+                .install(|| run_plan_gpu(&plan, &context))
+                .map_err(|e| Failure::Run(e.to_string()))?;
+            (result, run_start.elapsed())
+        }
     };
-    let run_start = Instant::now();
-    let result = pool
-        .install(|| run_plan(&plan, &context))
-        .map_err(|e| Failure::Run(e.to_string()))?;
-    let run_time = run_start.elapsed();
 
     let mut requests = args.outs.clone();
     let has_image = plan.outputs.iter().any(|o| o == "image");
@@ -385,7 +412,7 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     if args.profile {
         eprint!(
             "{}",
-            profile_report(&result.profile, setup_time, run_time, &setup.description)
+            profile_report(&result.profile, setup_time, run_time, &description)
         );
     }
     Ok(())

@@ -5,8 +5,10 @@
 use crate::volume_setup::{self, IsoRequest};
 use dpp_runtime::{FunctorLibrary, Uniforms};
 use dpp_tracer::builtin_scene::DEFAULT_RESOLUTION;
+use dpp_tracer::shading::MeshMaterials;
 use dpp_tracer::{
     Camera, CameraSetup, SceneFile, ShadingOverrides, StandardView, TraceResources, TraceScene,
+    TriangleMesh,
 };
 use glam::Vec3;
 use std::path::{Path, PathBuf};
@@ -43,25 +45,17 @@ pub struct SceneSetup {
 impl SceneSetup {
     /// Errors are the user's input (a bad file, a bad camera): exit status 2.
     pub fn new(request: &SceneRequest, library: &FunctorLibrary) -> Result<SceneSetup, String> {
-        let (scene, origin) = match &request.scene {
-            None => (
-                TraceScene::builtin(DEFAULT_RESOLUTION).map_err(|e| format!("error: the built-in scene failed: {e}"))?,
-                "built-in mixing layer".to_string(),
-            ),
-            Some(path) if volume_setup::is_volume_path(path) || request.raw.is_some() => {
-                (volume_scene(request, path, library)?, path.display().to_string())
-            }
-            Some(path) if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")) => (
-                TraceScene::from_obj(path).map_err(|e| format!("error: cannot use scene `{}`: {e}", path.display()))?,
-                path.display().to_string(),
-            ),
-            Some(path) => {
-                return Err(format!(
-                    "error: cannot read scene `{}`: dpp reads .obj meshes and .nii/.nii.gz volumes (raw bricks with --raw)",
-                    path.display()
-                ))
-            }
-        };
+        let (scene, origin) = load_scene(request, library)?;
+        SceneSetup::with_scene(Arc::new(scene), &origin, request)
+    }
+
+    /// The camera, shading and uniforms of an already loaded scene (`dpp bench`
+    /// builds each scene once and looks at it from several views).
+    pub fn with_scene(
+        scene: Arc<TraceScene>,
+        origin: &str,
+        request: &SceneRequest,
+    ) -> Result<SceneSetup, String> {
         let camera = camera(request, &scene).map_err(|e| format!("error: bad camera: {e}"))?;
         let description = format!(
             "{origin} ({} triangles), {}x{}",
@@ -69,8 +63,7 @@ impl SceneSetup {
             camera.width,
             camera.height
         );
-        let mut resources =
-            TraceResources::new(Arc::new(scene), Arc::new(CameraSetup::new(camera.clone())));
+        let mut resources = TraceResources::new(scene, Arc::new(CameraSetup::new(camera.clone())));
         let shading = Arc::make_mut(&mut resources.shading);
         if let Some(path) = scene_file(request) {
             let file = SceneFile::load(&path).map_err(|e| format!("error: {e}"))?;
@@ -91,8 +84,56 @@ impl SceneSetup {
     }
 }
 
+/// The scene a request names, its BVH built, and where it came from (for messages).
+pub fn load_scene(
+    request: &SceneRequest,
+    library: &FunctorLibrary,
+) -> Result<(TraceScene, String), String> {
+    match &request.scene {
+        None => Ok((
+            TraceScene::builtin(DEFAULT_RESOLUTION)
+                .map_err(|e| format!("error: the built-in scene failed: {e}"))?,
+            "built-in mixing layer".to_string(),
+        )),
+        Some(path) if volume_setup::is_volume_path(path) || request.raw.is_some() => Ok((
+            volume_scene(request, path, library)?,
+            path.display().to_string(),
+        )),
+        Some(path) => {
+            let (mesh, materials) = load_mesh(path)?;
+            let scene = TraceScene::with_materials(mesh, materials)
+                .map_err(|e| format!("error: cannot use scene `{}`: {e}", path.display()))?;
+            Ok((scene, path.display().to_string()))
+        }
+    }
+}
+
+/// A mesh file by its extension: `.obj` (with its MTL materials), `.ply`, or
+/// either gzip-compressed (`.obj.gz`: no materials).
+pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, MeshMaterials), String> {
+    let cannot =
+        |e: &dyn std::fmt::Display| format!("error: cannot use scene `{}`: {e}", path.display());
+    let name = path.to_string_lossy().to_ascii_lowercase();
+    if name.ends_with(".obj") {
+        dpp_tracer::obj::load_obj_with_materials(path).map_err(|e| cannot(&e))
+    } else if name.ends_with(".obj.gz") {
+        let mut reader = dpp_tracer::ply::open_maybe_gzipped(path)
+            .map_err(|e| format!("error: cannot open {}: {e}", path.display()))?;
+        let mesh = dpp_tracer::obj::read_obj(&mut reader).map_err(|e| cannot(&e))?;
+        Ok((mesh, MeshMaterials::default()))
+    } else if name.ends_with(".ply") || name.ends_with(".ply.gz") {
+        let mesh = dpp_tracer::ply::load_ply(path).map_err(|e| format!("error: {e}"))?;
+        Ok((mesh, MeshMaterials::default()))
+    } else {
+        Err(format!(
+            "error: cannot read scene `{}`: dpp reads .obj and .ply meshes (also gzip-compressed, .obj.gz, .ply.gz) and .nii/.nii.gz volumes (raw bricks with --raw)",
+            path.display()
+        ))
+    }
+}
+
 /// The isosurface of a volume, coloured by height or by a second field.
-fn volume_scene(
+pub fn volume_scene(
     request: &SceneRequest,
     path: &Path,
     library: &FunctorLibrary,
@@ -122,7 +163,7 @@ fn volume_scene(
     TraceScene::new(mesh).map_err(|e| format!("error: the isosurface of `{}`: {e}", path.display()))
 }
 
-/// The scene file given, or `mesh.toml` beside `mesh.obj` when there is one.
+/// The scene file given, or `mesh.toml` beside `mesh.obj` (`mesh.ply`, `mesh.obj.gz`…) when there is one.
 fn scene_file(request: &SceneRequest) -> Option<PathBuf> {
     if request.scene_file.is_some() {
         return request.scene_file.clone();

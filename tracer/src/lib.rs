@@ -7,6 +7,7 @@ pub mod camera;
 pub mod functors;
 pub mod mesh;
 pub mod obj;
+pub mod ply;
 mod random;
 pub mod scene;
 pub mod shading;

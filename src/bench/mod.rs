@@ -1,0 +1,891 @@
+//! `dpp bench`: the paper's measurement method (its §5). Every scene is loaded
+//! and its BVH built once (timed apart, never inside a frame); then for every
+//! view each workload runs warm-up rounds and measured rounds, fused and
+//! unfused, on the CPU backend. WORKLOAD1's rate is primary rays over the time
+//! of its `map<intersect>` stage (from the unfused plan, where that stage does
+//! nothing else) and over the whole frame; WORKLOAD2 and WORKLOAD3 report frames
+//! per second and the time of every stage. `--engine dpp,embree` also runs
+//! WORKLOAD1 with Embree behind `intersect` (single rays and 16-ray packets) and
+//! checks that both engines hit the same triangles.
+
+mod chart;
+mod report;
+
+use crate::scene_setup::{self, SceneRequest, SceneSetup};
+use crate::{volume_setup, Failure};
+use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
+use dpp_runtime::{CompileOptions, FunctorLibrary, Plan};
+use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
+use dpp_tracer::shading::MeshMaterials;
+use dpp_tracer::{StandardView, TraceScene, TriangleMesh, MISS_PRIM};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+pub use report::Report;
+
+/// Hits agree when both engines hit the same number of rays (give or take
+/// [`GRAZING_RAYS_PER_MILLION`]) and, for at least this share of the rays, name
+/// the same triangle or (a tie between overlapping triangles) a different one at
+/// the same distance.
+pub const AGREEMENT: f64 = 0.999;
+
+/// Rays in a million that may hit in one engine and miss in the other: a ray
+/// that grazes an edge on the surface's silhouette or open border, where the two
+/// watertight tests break the tie differently (measured: at most one ray of the
+/// 2M of a 1080p frame, in some views).
+pub const GRAZING_RAYS_PER_MILLION: u64 = 1;
+
+/// At most this many rays on which the engines disagree are kept for the JSON report.
+const MISMATCH_SAMPLES: usize = 8;
+
+/// Two hit distances are the same when they differ by less than this, relatively.
+const SAME_DISTANCE: f32 = 1e-6;
+
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    /// Scenes: `builtin` (the default), `builtin:RESOLUTION` (cells along x and y,
+    /// 8 to 512), `rm:X,Y,Z` (the Richtmyer–Meshkov volume of that grid, at level
+    /// 128), or a mesh file (.obj, .ply, .obj.gz, .ply.gz; a volume with --iso).
+    #[arg(value_name = "SCENE")]
+    scenes: Vec<String>,
+    /// Image size.
+    #[arg(long, default_value = "1920x1080", value_parser = crate::parse_size)]
+    size: (u32, u32),
+    /// Standard views, comma-separated.
+    #[arg(long, default_value = "front,back,zoom")]
+    views: String,
+    /// Workloads to run (1, 2, 3), comma-separated.
+    #[arg(long, default_value = "1,2,3")]
+    workloads: String,
+    /// Unmeasured rounds before the measured ones, per view, workload and plan.
+    #[arg(long, default_value_t = 1)]
+    warmup: u32,
+    /// Measured rounds (the reported time is their mean).
+    #[arg(long, default_value_t = 3)]
+    rounds: u32,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Intersection engines for WORKLOAD1: `dpp`, or `dpp,embree` to compare with
+    /// Embree 3 (needs a build with `--features embree`).
+    #[arg(long, default_value = "dpp")]
+    engine: String,
+    /// The isosurface level for volume files.
+    #[arg(long, allow_hyphen_values = true)]
+    iso: Option<f32>,
+    /// The folder with workload1.dpp, workload2.dpp and workload3.dpp
+    /// (default: ./pipelines, else the source tree's).
+    #[arg(long, value_name = "DIR")]
+    pipelines: Option<PathBuf>,
+    /// Also write the markdown tables to FILE.
+    #[arg(long, value_name = "FILE.md")]
+    markdown: Option<PathBuf>,
+    /// Write every measurement as JSON.
+    #[arg(long, value_name = "FILE.json")]
+    json: Option<PathBuf>,
+    /// Draw WORKLOAD1's rates (or the frame rates) as a PNG bar chart.
+    #[arg(long, value_name = "FILE.png")]
+    chart: Option<PathBuf>,
+}
+
+/// A scene as the command line names it.
+#[derive(Clone, Debug, PartialEq)]
+enum SceneSpec {
+    Builtin(u32),
+    Rm([u32; 3]),
+    File(PathBuf),
+}
+
+impl SceneSpec {
+    fn parse(text: &str) -> Result<SceneSpec, String> {
+        if text == "builtin" {
+            return Ok(SceneSpec::Builtin(DEFAULT_RESOLUTION));
+        }
+        if let Some(resolution) = text.strip_prefix("builtin:") {
+            let resolution: u32 = resolution.parse().map_err(|_| {
+                format!("error: `{text}`: the built-in scene's resolution is a whole number (like builtin:224)")
+            })?;
+            let range = dpp_tracer::builtin_scene::MIN_RESOLUTION
+                ..=dpp_tracer::builtin_scene::MAX_RESOLUTION;
+            if !range.contains(&resolution) {
+                return Err(format!(
+                    "error: `{text}`: the built-in scene's resolution must be in {}..={}",
+                    range.start(),
+                    range.end()
+                ));
+            }
+            return Ok(SceneSpec::Builtin(resolution));
+        }
+        if let Some(grid) = text.strip_prefix("rm:") {
+            let grid = match crate::parse_grid(grid) {
+                Ok(grid) => grid,
+                Err(_) => match grid.parse::<u32>() {
+                    Ok(n) => [n; 3],
+                    Err(_) => {
+                        return Err(format!(
+                        "error: `{text}`: give the volume's grid as rm:X,Y,Z (like rm:128,128,128)"
+                    ))
+                    }
+                },
+            };
+            if grid.iter().any(|&n| !(4..=1024).contains(&n)) {
+                return Err(format!(
+                    "error: `{text}`: each grid size must be in 4..=1024"
+                ));
+            }
+            return Ok(SceneSpec::Rm(grid));
+        }
+        let path = PathBuf::from(text);
+        if !path.is_file() {
+            return Err(format!(
+                "error: scene `{text}` is not a file (nor builtin, builtin:RESOLUTION or rm:X,Y,Z)"
+            ));
+        }
+        Ok(SceneSpec::File(path))
+    }
+
+    fn name(&self) -> String {
+        match self {
+            SceneSpec::Builtin(resolution) => format!("builtin:{resolution}"),
+            SceneSpec::Rm([x, y, z]) => format!("rm:{x},{y},{z}"),
+            SceneSpec::File(path) => path.file_name().map_or_else(
+                || path.display().to_string(),
+                |n| n.to_string_lossy().into(),
+            ),
+        }
+    }
+}
+
+/// Embree's modes, the engines WORKLOAD1 is compared with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Engine {
+    #[cfg_attr(not(feature = "embree"), allow(dead_code))]
+    EmbreeSingle,
+    #[cfg_attr(not(feature = "embree"), allow(dead_code))]
+    EmbreePacket,
+}
+
+impl Engine {
+    pub fn name(self) -> &'static str {
+        match self {
+            Engine::EmbreeSingle => "embree-single",
+            Engine::EmbreePacket => "embree-packet",
+        }
+    }
+}
+
+/// Everything parsed and checked before anything runs.
+struct Setup {
+    scenes: Vec<SceneSpec>,
+    views: Vec<(String, StandardView)>,
+    workloads: Vec<u32>,
+    embree: bool,
+    pipelines: PathBuf,
+}
+
+fn check(args: &BenchArgs) -> Result<Setup, String> {
+    let list = |text: &str| -> Vec<String> {
+        text.split(',')
+            .map(|s| s.trim().to_string())
+            .filter(|s| !s.is_empty())
+            .collect()
+    };
+    let mut views = Vec::new();
+    for name in list(&args.views) {
+        let view: StandardView = name.parse().map_err(|e| format!("error: --views: {e}"))?;
+        views.push((name, view));
+    }
+    if views.is_empty() {
+        return Err("error: --views names no view (front, back, zoom)".into());
+    }
+    let mut workloads = Vec::new();
+    for name in list(&args.workloads) {
+        match name.trim_start_matches("workload").parse::<u32>() {
+            Ok(n @ 1..=3) if !workloads.contains(&n) => workloads.push(n),
+            Ok(1..=3) => {}
+            _ => {
+                return Err(format!(
+                    "error: --workloads: unknown workload `{name}`; the workloads are 1, 2 and 3"
+                ))
+            }
+        }
+    }
+    if workloads.is_empty() {
+        return Err("error: --workloads names no workload (1, 2, 3)".into());
+    }
+    let mut embree = false;
+    for name in list(&args.engine) {
+        match name.as_str() {
+            "dpp" => {}
+            "embree" => embree = true,
+            other => {
+                return Err(format!(
+                    "error: --engine: unknown engine `{other}`; the engines are dpp and embree"
+                ))
+            }
+        }
+    }
+    if embree && !cfg!(feature = "embree") {
+        return Err(
+            "error: --engine embree: this dpp was built without Embree; rebuild with `cargo build --release --features embree` (needs libembree-dev)".into(),
+        );
+    }
+    if embree && !workloads.contains(&1) {
+        return Err("error: --engine embree compares WORKLOAD1: add 1 to --workloads".into());
+    }
+    if args.rounds == 0 {
+        return Err("error: --rounds must be at least 1".into());
+    }
+    let specs: Vec<String> = if args.scenes.is_empty() {
+        vec!["builtin".into()]
+    } else {
+        args.scenes.clone()
+    };
+    let scenes = specs
+        .iter()
+        .map(|s| SceneSpec::parse(s))
+        .collect::<Result<Vec<_>, _>>()?;
+    let pipelines = match &args.pipelines {
+        Some(dir) => dir.clone(),
+        None if Path::new("pipelines/workload1.dpp").is_file() => PathBuf::from("pipelines"),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines"),
+    };
+    for workload in &workloads {
+        let path = pipelines.join(format!("workload{workload}.dpp"));
+        if !path.is_file() {
+            return Err(format!(
+                "error: cannot find {}; name the folder of the workload pipelines with --pipelines DIR",
+                path.display()
+            ));
+        }
+    }
+    Ok(Setup {
+        scenes,
+        views,
+        workloads,
+        embree,
+        pipelines,
+    })
+}
+
+/// One plan run `warmup + rounds` times: the measured frames and the mean time
+/// of every stage.
+#[derive(Clone, Debug)]
+pub struct Measurement {
+    /// Wall time of each measured frame (`run_plan`), in ms.
+    pub frames_ms: Vec<f64>,
+    pub stages: Vec<StageTime>,
+}
+
+#[derive(Clone, Debug)]
+pub struct StageTime {
+    pub stage: usize,
+    pub label: String,
+    /// Mean over the measured rounds.
+    pub ms: f64,
+}
+
+impl Measurement {
+    pub fn mean_ms(&self) -> f64 {
+        self.frames_ms.iter().sum::<f64>() / self.frames_ms.len().max(1) as f64
+    }
+
+    pub fn fps(&self) -> f64 {
+        1e3 / self.mean_ms()
+    }
+
+    /// The mean time of the stage that is `map<intersect>` alone.
+    pub fn intersect_ms(&self) -> Option<f64> {
+        self.stages
+            .iter()
+            .find(|s| s.label == "map<intersect>")
+            .map(|s| s.ms)
+    }
+}
+
+/// A workload on one view: fused and unfused.
+#[derive(Clone, Debug)]
+pub struct WorkloadResult {
+    pub workload: u32,
+    pub fused: Measurement,
+    pub unfused: Measurement,
+}
+
+impl WorkloadResult {
+    /// How much faster the fused plan runs.
+    pub fn fusion_gain(&self) -> f64 {
+        self.unfused.mean_ms() / self.fused.mean_ms()
+    }
+}
+
+/// WORKLOAD1 with one engine behind `intersect`, against dpp's own hits.
+#[derive(Clone, Debug)]
+pub struct EngineResult {
+    pub engine: Engine,
+    pub fused: Measurement,
+    pub unfused: Measurement,
+    /// Rays that hit something, with dpp's traversal and with this engine.
+    pub hits_dpp: u64,
+    pub hits_engine: u64,
+    /// The share of rays for which both name the same triangle (or both miss).
+    pub same_triangle: f64,
+    /// The share of rays that hit different triangles at the same distance
+    /// (overlapping or duplicated triangles: either is the closest hit).
+    pub ties: f64,
+    /// Rays in the frame.
+    pub rays: u64,
+    /// A few rays that one engine hits and the other misses: pixel (row-major),
+    /// dpp's triangle and distance, the engine's.
+    pub mismatches: Vec<(u32, u32, f32, u32, f32)>,
+}
+
+impl EngineResult {
+    pub fn agrees(&self) -> bool {
+        let grazing = self.rays * GRAZING_RAYS_PER_MILLION / 1_000_000;
+        self.hits_dpp.abs_diff(self.hits_engine) <= grazing
+            && self.same_triangle + self.ties >= AGREEMENT
+    }
+}
+
+/// WORKLOAD1's `prim` and `depth` outputs (row-major pixels).
+pub struct Hits {
+    prim: Vec<u32>,
+    depth: Vec<f32>,
+}
+
+#[derive(Clone, Debug)]
+pub struct ViewResult {
+    pub view: String,
+    pub rays: u64,
+    pub workloads: Vec<WorkloadResult>,
+    pub engines: Vec<EngineResult>,
+}
+
+#[derive(Clone, Debug)]
+pub struct SceneResult {
+    pub name: String,
+    pub triangles: usize,
+    /// Reading or generating the mesh.
+    pub load_ms: f64,
+    /// Vertex normals computed at load (meshes without normals).
+    pub normals_ms: f64,
+    /// dpp's BVH (obvhs build and flattening).
+    pub bvh_ms: f64,
+    /// Embree's scene (copy and BVH build), with `--engine embree`.
+    pub embree_build_ms: Option<f64>,
+    pub views: Vec<ViewResult>,
+}
+
+pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
+    let setup = check(&args).map_err(Failure::Input)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.unwrap_or(0))
+        .build()
+        .map_err(|e| Failure::Input(format!("error: cannot start threads: {e}")))?;
+    let threads = pool.current_num_threads();
+
+    let mut plans = Vec::new();
+    for &workload in &setup.workloads {
+        let path = setup.pipelines.join(format!("workload{workload}.dpp"));
+        let fused = compile(&path, library, true)?;
+        let unfused = compile(&path, library, false)?;
+        plans.push((workload, path, fused, unfused));
+    }
+
+    let rounds = u64::from(args.warmup + args.rounds);
+    let per_view = 2 * setup.workloads.len() as u64 + if setup.embree { 4 } else { 0 };
+    let total = setup.scenes.len() as u64 * setup.views.len() as u64 * per_view * rounds;
+    let progress = progress_bar(total);
+
+    let mut scenes = Vec::new();
+    for spec in &setup.scenes {
+        progress.set_message(format!("{}: loading", spec.name()));
+        let loaded = load(spec, &args, library)?;
+        let scene = Arc::new(loaded.scene);
+        #[cfg(feature = "embree")]
+        let embree = if setup.embree {
+            progress.set_message(format!("{}: building Embree's BVH", spec.name()));
+            let built = dpp_tracer::functors::intersect_embree::EmbreeScene::build(&scene.mesh)
+                .map_err(|e| Failure::Run(e.to_string()))?;
+            Some(Arc::new(built))
+        } else {
+            None
+        };
+        #[cfg(not(feature = "embree"))]
+        let embree: Option<()> = None;
+
+        let mut result = SceneResult {
+            name: spec.name(),
+            triangles: scene.mesh.triangles.len(),
+            load_ms: ms(loaded.load),
+            normals_ms: ms(loaded.normals),
+            bvh_ms: ms(loaded.bvh),
+            #[cfg(feature = "embree")]
+            embree_build_ms: embree.as_ref().map(|e| ms(e.build_time)),
+            #[cfg(not(feature = "embree"))]
+            embree_build_ms: None,
+            views: Vec::new(),
+        };
+        for (view_name, _) in &setup.views {
+            let request = scene_request(spec, view_name, args.size, args.iso);
+            let view = SceneSetup::with_scene(scene.clone(), &spec.name(), &request)
+                .map_err(Failure::Input)?;
+            let rays = u64::from(view.camera.pixels());
+            let mut view_result = ViewResult {
+                view: view_name.clone(),
+                rays,
+                workloads: Vec::new(),
+                engines: Vec::new(),
+            };
+            let mut dpp_prims = None;
+            for (workload, _, fused, unfused) in &plans {
+                let label = |fusion: &str| {
+                    format!("{} {view_name} workload{workload} {fusion}", spec.name())
+                };
+                progress.set_message(label("fused"));
+                let (fused, _) = measure(fused, library, &view, &pool, &args, &progress, false)?;
+                progress.set_message(label("unfused"));
+                let (unfused, prims) = measure(
+                    unfused,
+                    library,
+                    &view,
+                    &pool,
+                    &args,
+                    &progress,
+                    *workload == 1,
+                )?;
+                if *workload == 1 {
+                    dpp_prims = prims;
+                }
+                view_result.workloads.push(WorkloadResult {
+                    workload: *workload,
+                    fused,
+                    unfused,
+                });
+            }
+            #[cfg(feature = "embree")]
+            if let (Some(embree), Some(dpp_prims)) = (&embree, &dpp_prims) {
+                use dpp_tracer::functors::intersect_embree::{library_with_embree, EmbreeMode};
+                let path = &plans.iter().find(|p| p.0 == 1).expect("checked").1;
+                for (engine, mode) in [
+                    (Engine::EmbreeSingle, EmbreeMode::Single),
+                    (Engine::EmbreePacket, EmbreeMode::Packet16),
+                ] {
+                    let swapped = library_with_embree(library, embree.clone(), mode)
+                        .map_err(|e| Failure::Run(e.0))?;
+                    let fused = compile(path, &swapped, true)?;
+                    let unfused = compile(path, &swapped, false)?;
+                    progress.set_message(format!(
+                        "{} {view_name} workload1 {}",
+                        spec.name(),
+                        engine.name()
+                    ));
+                    let (fused, _) =
+                        measure(&fused, &swapped, &view, &pool, &args, &progress, false)?;
+                    let (unfused, prims) =
+                        measure(&unfused, &swapped, &view, &pool, &args, &progress, true)?;
+                    let prims = prims.expect("workload1 outputs prim and depth");
+                    view_result
+                        .engines
+                        .push(compare(engine, fused, unfused, dpp_prims, &prims));
+                }
+            }
+            let _ = (&embree, &dpp_prims);
+            result.views.push(view_result);
+        }
+        scenes.push(result);
+    }
+    progress.finish_and_clear();
+
+    let report = Report {
+        cpu: cpu_model(),
+        threads,
+        size: args.size,
+        warmup: args.warmup,
+        rounds: args.rounds,
+        scenes,
+    };
+    let markdown = report.markdown();
+    print!("{markdown}");
+    if let Some(path) = &args.markdown {
+        std::fs::write(path, &markdown)
+            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+    }
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&report.json())
+            .map_err(|e| Failure::Run(e.to_string()))?;
+        std::fs::write(path, text + "\n")
+            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+    }
+    if let Some(path) = &args.chart {
+        chart::draw(&report, path)
+            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+    }
+    let disagreements: Vec<String> = report
+        .scenes
+        .iter()
+        .flat_map(|s| s.views.iter().map(move |v| (s, v)))
+        .flat_map(|(s, v)| v.engines.iter().map(move |e| (s, v, e)))
+        .filter(|(_, _, e)| !e.agrees())
+        .map(|(s, v, e)| {
+            format!(
+                "{} {}: {} hits {} rays, dpp {}; same triangle on {:.4}% of the rays, a tie on {:.4}%",
+                s.name,
+                v.view,
+                e.engine.name(),
+                e.hits_engine,
+                e.hits_dpp,
+                100.0 * e.same_triangle,
+                100.0 * e.ties
+            )
+        })
+        .collect();
+    if !disagreements.is_empty() {
+        return Err(Failure::Run(format!(
+            "the engines' hits disagree (need equal hit counts, give or take {} ray(s) per million, and the same triangle or a tie on {}% of the rays):\n  {}",
+            GRAZING_RAYS_PER_MILLION,
+            100.0 * AGREEMENT,
+            disagreements.join("\n  ")
+        )));
+    }
+    Ok(())
+}
+
+fn compile(path: &Path, library: &FunctorLibrary, fuse: bool) -> Result<Plan, Failure> {
+    crate::compile(
+        path,
+        library,
+        &CompileOptions {
+            fuse,
+            overrides: Vec::new(),
+        },
+    )
+}
+
+fn ms(duration: Duration) -> f64 {
+    duration.as_secs_f64() * 1e3
+}
+
+fn progress_bar(total: u64) -> ProgressBar {
+    let target = if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        ProgressDrawTarget::stderr()
+    } else {
+        ProgressDrawTarget::hidden()
+    };
+    let bar = ProgressBar::with_draw_target(Some(total), target);
+    if let Ok(style) =
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} frames  {msg}")
+    {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}
+
+/// What a run of `dpp run` would ask for, for one view of the scene.
+fn scene_request(spec: &SceneSpec, view: &str, size: (u32, u32), iso: Option<f32>) -> SceneRequest {
+    SceneRequest {
+        scene: match spec {
+            SceneSpec::File(path) => Some(path.clone()),
+            _ => None,
+        },
+        size,
+        view: view.to_string(),
+        eye: None,
+        look_at: None,
+        up: None,
+        fov: 45.0,
+        scene_file: None,
+        shading: Default::default(),
+        iso,
+        raw: None,
+        color_by: None,
+        iso_pipeline: None,
+        fuse: true,
+    }
+}
+
+struct Loaded {
+    scene: TraceScene,
+    load: Duration,
+    normals: Duration,
+    bvh: Duration,
+}
+
+/// Loads or generates a scene, timing the load, the vertex normals and the BVH apart.
+fn load(spec: &SceneSpec, args: &BenchArgs, library: &FunctorLibrary) -> Result<Loaded, Failure> {
+    let start = Instant::now();
+    let (mut mesh, materials): (TriangleMesh, MeshMaterials) = match spec {
+        SceneSpec::Builtin(resolution) => (
+            builtin_scene(*resolution).map_err(|e| Failure::Input(format!("error: {e}")))?,
+            MeshMaterials::default(),
+        ),
+        SceneSpec::Rm(grid) => {
+            let volume = dpp_tracer::volume::generate::Dataset::RichtmyerMeshkov
+                .generate(glam::UVec3::from(*grid))
+                .map_err(|e| Failure::Input(format!("error: {e}")))?;
+            (
+                iso_mesh(
+                    volume,
+                    dpp_tracer::volume::generate::RM_DEFAULT_LEVEL,
+                    library,
+                )?,
+                MeshMaterials::default(),
+            )
+        }
+        SceneSpec::File(path) if volume_setup::is_volume_path(path) => {
+            let Some(level) = args.iso else {
+                return Err(Failure::Input(format!(
+                    "error: `{}` is a volume: give the isosurface level with --iso LEVEL",
+                    path.display()
+                )));
+            };
+            let volume = volume_setup::load_volume(path, None).map_err(Failure::Input)?;
+            (iso_mesh(volume, level, library)?, MeshMaterials::default())
+        }
+        SceneSpec::File(path) => scene_setup::load_mesh(path).map_err(Failure::Input)?,
+    };
+    let load = start.elapsed();
+    let start = Instant::now();
+    if mesh.normals.is_none() {
+        mesh.validate()
+            .map_err(|e| Failure::Input(format!("error: {}: {e}", spec.name())))?;
+        mesh.add_crease_normals(dpp_tracer::scene::CREASE_ANGLE_DEGREES.to_radians());
+    }
+    let normals = start.elapsed();
+    let start = Instant::now();
+    let scene = TraceScene::with_materials(mesh, materials)
+        .map_err(|e| Failure::Input(format!("error: {}: {e}", spec.name())))?;
+    let bvh = start.elapsed();
+    Ok(Loaded {
+        scene,
+        load,
+        normals,
+        bvh,
+    })
+}
+
+/// The isosurface of a volume, coloured by height.
+fn iso_mesh(
+    volume: dpp_tracer::volume::Volume,
+    level: f32,
+    library: &FunctorLibrary,
+) -> Result<TriangleMesh, Failure> {
+    let request = volume_setup::IsoRequest {
+        level,
+        pipeline: None,
+        fuse: true,
+    };
+    let mut mesh = volume_setup::isosurface(volume, &request, library).map_err(Failure::Input)?;
+    mesh.scalars = None;
+    Ok(mesh)
+}
+
+/// Runs `plan` for the warm-up and measured rounds; with `keep_prims`, also
+/// returns the `prim` and `depth` outputs of the last round.
+fn measure(
+    plan: &Plan,
+    library: &FunctorLibrary,
+    view: &SceneSetup,
+    pool: &rayon::ThreadPool,
+    args: &BenchArgs,
+    progress: &ProgressBar,
+    keep_prims: bool,
+) -> Result<(Measurement, Option<Hits>), Failure> {
+    let context = RunContext {
+        library,
+        uniforms: &view.uniforms,
+        resources: &view.resources,
+        chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
+    };
+    let mut frames_ms = Vec::new();
+    let mut stages: Vec<StageTime> = Vec::new();
+    let mut prims = None;
+    for round in 0..args.warmup + args.rounds {
+        let start = Instant::now();
+        let result = pool
+            .install(|| run_plan(plan, &context))
+            .map_err(|e| Failure::Run(format!("{}: {e}", plan.pipeline)))?;
+        let elapsed = start.elapsed();
+        progress.inc(1);
+        if round < args.warmup {
+            continue;
+        }
+        frames_ms.push(ms(elapsed));
+        if stages.is_empty() {
+            stages = result
+                .profile
+                .iter()
+                .map(|t| StageTime {
+                    stage: t.stage,
+                    label: t.label.clone(),
+                    ms: 0.0,
+                })
+                .collect();
+        }
+        for (stage, timing) in stages.iter_mut().zip(&result.profile) {
+            stage.ms += ms(timing.time) / f64::from(args.rounds);
+        }
+        if keep_prims && round + 1 == args.warmup + args.rounds {
+            let output = |name: &str| {
+                result
+                    .outputs
+                    .iter()
+                    .find(|(output, _)| output == name)
+                    .and_then(|(_, value)| match value {
+                        OutputValue::Array(column) => Some(column.clone()),
+                        OutputValue::Host(_) => None,
+                    })
+            };
+            if let (Some(prim), Some(depth)) = (output("prim"), output("depth")) {
+                prims = Some(Hits {
+                    prim: prim.view().as_u32().to_vec(),
+                    depth: depth.view().as_f32().to_vec(),
+                });
+            }
+        }
+    }
+    Ok((Measurement { frames_ms, stages }, prims))
+}
+
+/// Hit counts, and the shares of rays on which both engines name the same
+/// triangle, or different triangles at the same distance.
+#[cfg_attr(not(feature = "embree"), allow(dead_code))]
+fn compare(
+    engine: Engine,
+    fused: Measurement,
+    unfused: Measurement,
+    dpp: &Hits,
+    other: &Hits,
+) -> EngineResult {
+    let hits = |h: &Hits| h.prim.iter().filter(|&&p| p != MISS_PRIM).count() as u64;
+    let rays = dpp.prim.len();
+    let comparable = rays > 0 && rays == other.prim.len() && rays == dpp.depth.len();
+    let (mut same, mut ties) = (0usize, 0usize);
+    let mut mismatches = Vec::new();
+    for i in 0..rays.min(other.prim.len()) {
+        if (dpp.prim[i] == MISS_PRIM) != (other.prim[i] == MISS_PRIM)
+            && mismatches.len() < MISMATCH_SAMPLES
+        {
+            mismatches.push((
+                i as u32,
+                dpp.prim[i],
+                dpp.depth[i],
+                other.prim[i],
+                other.depth[i],
+            ));
+        }
+        if dpp.prim[i] == other.prim[i] {
+            same += 1;
+        } else if dpp.prim[i] != MISS_PRIM
+            && other.prim[i] != MISS_PRIM
+            && (dpp.depth[i] - other.depth[i]).abs() <= SAME_DISTANCE * dpp.depth[i].abs()
+        {
+            ties += 1;
+        }
+    }
+    let share = |count: usize| {
+        if comparable {
+            count as f64 / rays as f64
+        } else {
+            0.0
+        }
+    };
+    EngineResult {
+        engine,
+        fused,
+        unfused,
+        hits_dpp: hits(dpp),
+        hits_engine: hits(other),
+        same_triangle: share(same),
+        ties: share(ties),
+        rays: rays as u64,
+        mismatches,
+    }
+}
+
+/// The CPU's model name from /proc/cpuinfo, when there is one.
+fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|text| {
+            text.lines()
+                .find(|line| line.starts_with("model name"))
+                .and_then(|line| line.split_once(':'))
+                .map(|(_, name)| name.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scene_specs() {
+        assert_eq!(
+            SceneSpec::parse("builtin"),
+            Ok(SceneSpec::Builtin(DEFAULT_RESOLUTION))
+        );
+        assert_eq!(SceneSpec::parse("builtin:64"), Ok(SceneSpec::Builtin(64)));
+        assert_eq!(
+            SceneSpec::parse("rm:128,64,32"),
+            Ok(SceneSpec::Rm([128, 64, 32]))
+        );
+        assert_eq!(SceneSpec::parse("rm:96"), Ok(SceneSpec::Rm([96; 3])));
+        for bad in [
+            "builtin:2",
+            "builtin:x",
+            "rm:",
+            "rm:1,2",
+            "rm:2000",
+            "/no/such.ply",
+        ] {
+            assert!(SceneSpec::parse(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn agreement_needs_equal_hit_counts_and_ids() {
+        let m = Measurement {
+            frames_ms: vec![1.0],
+            stages: vec![],
+        };
+        let miss = MISS_PRIM;
+        let prim: Vec<u32> = (0..2000)
+            .map(|i| if i % 3 == 0 { miss } else { i })
+            .collect();
+        let depth: Vec<f32> = prim
+            .iter()
+            .map(|&p| if p == miss { f32::INFINITY } else { p as f32 })
+            .collect();
+        let dpp = Hits {
+            prim: prim.clone(),
+            depth: depth.clone(),
+        };
+        let engine = Engine::EmbreeSingle;
+        let result = compare(engine, m.clone(), m.clone(), &dpp, &dpp);
+        assert!(result.agrees());
+        assert_eq!((result.same_triangle, result.ties), (1.0, 0.0));
+        // Another triangle, farther away: 99.95% still agree.
+        let mut other = Hits { prim, depth };
+        other.prim[1] = 7;
+        other.depth[1] = 9.0;
+        let result = compare(engine, m.clone(), m.clone(), &dpp, &other);
+        assert!(result.agrees());
+        assert_eq!((result.same_triangle, result.ties), (0.9995, 0.0));
+        // Many ties: different triangles at the same distance.
+        for i in (2..400).filter(|i| i % 3 != 0) {
+            other.prim[i] += 1;
+        }
+        let result = compare(engine, m.clone(), m.clone(), &dpp, &other);
+        assert!(result.same_triangle < 0.9 && result.agrees());
+        // A miss became a hit.
+        other.prim[0] = 7;
+        other.depth[0] = 7.0;
+        let result = compare(engine, m.clone(), m, &dpp, &other);
+        assert!(!result.agrees());
+        assert_eq!(result.hits_engine, result.hits_dpp + 1);
+    }
+}

@@ -1,0 +1,351 @@
+//! `dpp bench`'s results as markdown tables (in the manner of the paper's
+//! tables) and as JSON.
+
+use super::{Engine, Measurement, SceneResult, AGREEMENT};
+use serde_json::{json, Value};
+use std::fmt::Write;
+
+pub struct Report {
+    pub cpu: String,
+    pub threads: usize,
+    pub size: (u32, u32),
+    pub warmup: u32,
+    pub rounds: u32,
+    pub scenes: Vec<SceneResult>,
+}
+
+fn mrays(rays: u64, ms: f64) -> f64 {
+    rays as f64 / (ms * 1e3)
+}
+
+impl Report {
+    fn has_workload(&self, workload: u32) -> bool {
+        self.scenes
+            .iter()
+            .flat_map(|s| &s.views)
+            .flat_map(|v| &v.workloads)
+            .any(|w| w.workload == workload)
+    }
+
+    fn has_engines(&self) -> bool {
+        self.scenes
+            .iter()
+            .flat_map(|s| &s.views)
+            .any(|v| !v.engines.is_empty())
+    }
+
+    pub fn markdown(&self) -> String {
+        let mut md = String::new();
+        let (width, height) = self.size;
+        let _ = writeln!(md, "# dpp bench\n");
+        let _ = writeln!(
+            md,
+            "{} ({} threads), {width}x{height}, {} warm-up + {} measured rounds per plan (times are means).\n",
+            self.cpu, self.threads, self.warmup, self.rounds
+        );
+
+        let _ = writeln!(md, "## Scenes\n");
+        let embree = self.scenes.iter().any(|s| s.embree_build_ms.is_some());
+        let _ = writeln!(
+            md,
+            "| scene | triangles | load ms | normals ms | BVH build ms |{}",
+            if embree { " Embree build ms |" } else { "" }
+        );
+        let _ = writeln!(
+            md,
+            "| --- | ---: | ---: | ---: | ---: |{}",
+            if embree { " ---: |" } else { "" }
+        );
+        for scene in &self.scenes {
+            let _ = write!(
+                md,
+                "| {} | {} | {:.1} | {:.1} | {:.1} |",
+                scene.name, scene.triangles, scene.load_ms, scene.normals_ms, scene.bvh_ms
+            );
+            if embree {
+                let _ = write!(
+                    md,
+                    " {} |",
+                    scene
+                        .embree_build_ms
+                        .map_or("–".into(), |v| format!("{v:.1}"))
+                );
+            }
+            md.push('\n');
+        }
+        md.push('\n');
+
+        if self.has_workload(1) {
+            let _ = writeln!(md, "## WORKLOAD1 (primary rays), Mrays/s\n");
+            let _ = writeln!(md, "`map<intersect>`: primary rays over the time of that stage alone (unfused plan); frame: over the whole frame.\n");
+            let _ = writeln!(md, "| scene | view | rays | `map<intersect>` | frame, fused | frame, unfused | fusion gain |");
+            let _ = writeln!(md, "| --- | --- | ---: | ---: | ---: | ---: | ---: |");
+            for scene in &self.scenes {
+                for view in &scene.views {
+                    for w in view.workloads.iter().filter(|w| w.workload == 1) {
+                        let _ = writeln!(
+                            md,
+                            "| {} | {} | {} | {} | {:.2} | {:.2} | {:.2}× |",
+                            scene.name,
+                            view.view,
+                            view.rays,
+                            w.unfused
+                                .intersect_ms()
+                                .map_or("–".into(), |t| format!("{:.2}", mrays(view.rays, t))),
+                            mrays(view.rays, w.fused.mean_ms()),
+                            mrays(view.rays, w.unfused.mean_ms()),
+                            w.fusion_gain()
+                        );
+                    }
+                }
+            }
+            md.push('\n');
+        }
+
+        if self.has_engines() {
+            let _ = writeln!(
+                md,
+                "## WORKLOAD1: dpp against Embree, `map<intersect>` Mrays/s\n"
+            );
+            let _ = writeln!(md, "The same pipeline with Embree behind `intersect` (`rtcIntersect1` per ray, or `rtcIntersect16` packets). Ratio: dpp's rate over Embree's. Hits: rays that hit, dpp / Embree; same triangle: rays for which both name the same triangle or both miss, and (+) rays that hit different triangles at the same distance (overlapping triangles, a tie). They agree (✗ where not) when the hit counts are equal (give or take {} ray per million: a ray grazing an edge on the silhouette or the open border) and the two shares add up to {:.1}% or more.\n", super::GRAZING_RAYS_PER_MILLION, 100.0 * AGREEMENT);
+            let _ = writeln!(md, "| scene | view | dpp | Embree single | Embree packet | dpp / single | dpp / packet | hits (single) | hits (packet) | same triangle (single / packet) |");
+            let _ = writeln!(
+                md,
+                "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+            );
+            for scene in &self.scenes {
+                for view in &scene.views {
+                    let Some(own) = view
+                        .workloads
+                        .iter()
+                        .find(|w| w.workload == 1)
+                        .and_then(|w| w.unfused.intersect_ms())
+                    else {
+                        continue;
+                    };
+                    let engine = |e: Engine| view.engines.iter().find(|r| r.engine == e);
+                    let rate = |m: &Measurement| m.intersect_ms().map(|t| mrays(view.rays, t));
+                    let cell = |v: Option<f64>, digits: usize| {
+                        v.map_or("–".into(), |v| format!("{v:.digits$}"))
+                    };
+                    let single = engine(Engine::EmbreeSingle);
+                    let packet = engine(Engine::EmbreePacket);
+                    let single_rate = single.and_then(|e| rate(&e.unfused));
+                    let packet_rate = packet.and_then(|e| rate(&e.unfused));
+                    let own_rate = mrays(view.rays, own);
+                    let hits = |e: Option<&super::EngineResult>| {
+                        e.map_or("–".into(), |e| {
+                            format!(
+                                "{} / {}{}",
+                                e.hits_dpp,
+                                e.hits_engine,
+                                if e.agrees() { "" } else { " ✗" }
+                            )
+                        })
+                    };
+                    let same = |e: Option<&super::EngineResult>| {
+                        e.map_or("–".into(), |e| {
+                            if e.ties > 0.0 {
+                                format!("{:.3}% (+{:.3}%)", 100.0 * e.same_triangle, 100.0 * e.ties)
+                            } else {
+                                format!("{:.3}%", 100.0 * e.same_triangle)
+                            }
+                        })
+                    };
+                    let _ = writeln!(
+                        md,
+                        "| {} | {} | {:.2} | {} | {} | {} | {} | {} | {} | {} / {} |",
+                        scene.name,
+                        view.view,
+                        own_rate,
+                        cell(single_rate, 2),
+                        cell(packet_rate, 2),
+                        cell(single_rate.map(|r| own_rate / r), 2),
+                        cell(packet_rate.map(|r| own_rate / r), 2),
+                        hits(single),
+                        hits(packet),
+                        same(single),
+                        same(packet),
+                    );
+                }
+            }
+            md.push('\n');
+        }
+
+        if self.has_workload(2) || self.has_workload(3) {
+            let _ = writeln!(md, "## WORKLOAD2 and WORKLOAD3, frames per second\n");
+            let _ = writeln!(md, "| scene | view | workload | fused fps | unfused fps | fused ms | unfused ms | fusion gain |");
+            let _ = writeln!(md, "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: |");
+            for scene in &self.scenes {
+                for view in &scene.views {
+                    for w in view.workloads.iter().filter(|w| w.workload != 1) {
+                        let _ = writeln!(
+                            md,
+                            "| {} | {} | WORKLOAD{} | {:.3} | {:.3} | {:.1} | {:.1} | {:.2}× |",
+                            scene.name,
+                            view.view,
+                            w.workload,
+                            w.fused.fps(),
+                            w.unfused.fps(),
+                            w.fused.mean_ms(),
+                            w.unfused.mean_ms(),
+                            w.fusion_gain()
+                        );
+                    }
+                }
+            }
+            md.push('\n');
+        }
+
+        let _ = writeln!(
+            md,
+            "## Time per stage, ms per frame (mean over the views)\n"
+        );
+        for scene in &self.scenes {
+            let workloads: Vec<u32> = scene
+                .views
+                .first()
+                .map(|v| v.workloads.iter().map(|w| w.workload).collect())
+                .unwrap_or_default();
+            for workload in workloads {
+                for fused in [true, false] {
+                    let measurements: Vec<&Measurement> = scene
+                        .views
+                        .iter()
+                        .flat_map(|v| v.workloads.iter().filter(|w| w.workload == workload))
+                        .map(|w| if fused { &w.fused } else { &w.unfused })
+                        .collect();
+                    let Some(first) = measurements.first() else {
+                        continue;
+                    };
+                    let views = measurements.len() as f64;
+                    let frame = measurements.iter().map(|m| m.mean_ms()).sum::<f64>() / views;
+                    let _ = writeln!(
+                        md,
+                        "{} WORKLOAD{workload}, {} ({} stages, frame {frame:.1} ms):\n",
+                        scene.name,
+                        if fused { "fused" } else { "unfused" },
+                        first.stages.len()
+                    );
+                    let _ = writeln!(md, "| stage | ops | ms | share |");
+                    let _ = writeln!(md, "| ---: | --- | ---: | ---: |");
+                    for (i, stage) in first.stages.iter().enumerate() {
+                        let mean = measurements
+                            .iter()
+                            .filter_map(|m| m.stages.get(i))
+                            .map(|s| s.ms)
+                            .sum::<f64>()
+                            / views;
+                        let _ = writeln!(
+                            md,
+                            "| {} | `{}` | {:.2} | {:.1}% |",
+                            stage.stage,
+                            stage.label,
+                            mean,
+                            100.0 * mean / frame
+                        );
+                    }
+                    md.push('\n');
+                }
+            }
+        }
+        md
+    }
+
+    pub fn json(&self) -> Value {
+        let report_width = self.size.0.max(1);
+        // JSON has no infinity: a miss's distance is null.
+        let finite = |t: f32| if t.is_finite() { json!(t) } else { Value::Null };
+        let measurement = |m: &Measurement, rays: Option<u64>| {
+            let mut value = json!({
+                "frames_ms": m.frames_ms,
+                "mean_frame_ms": m.mean_ms(),
+                "fps": m.fps(),
+                "stages": m.stages.iter().map(|s| json!({
+                    "stage": s.stage,
+                    "ops": s.label,
+                    "ms": s.ms,
+                })).collect::<Vec<_>>(),
+            });
+            if let Some(rays) = rays {
+                value["frame_mrays_per_s"] = json!(mrays(rays, m.mean_ms()));
+                if let Some(t) = m.intersect_ms() {
+                    value["intersect_ms"] = json!(t);
+                    value["intersect_mrays_per_s"] = json!(mrays(rays, t));
+                }
+            }
+            value
+        };
+        let scenes: Vec<Value> = self
+            .scenes
+            .iter()
+            .map(|scene| {
+                let views: Vec<Value> = scene
+                    .views
+                    .iter()
+                    .map(|view| {
+                        let rays = |workload: u32| (workload == 1).then_some(view.rays);
+                        let own = view
+                            .workloads
+                            .iter()
+                            .find(|w| w.workload == 1)
+                            .and_then(|w| w.unfused.intersect_ms());
+                        json!({
+                            "view": view.view,
+                            "primary_rays": view.rays,
+                            "workloads": view.workloads.iter().map(|w| json!({
+                                "workload": w.workload,
+                                "fused": measurement(&w.fused, rays(w.workload)),
+                                "unfused": measurement(&w.unfused, rays(w.workload)),
+                                "fusion_gain": w.fusion_gain(),
+                            })).collect::<Vec<_>>(),
+                            "engines": view.engines.iter().map(|e| {
+                                let rate = e.unfused.intersect_ms().map(|t| mrays(view.rays, t));
+                                json!({
+                                    "engine": e.engine.name(),
+                                    "fused": measurement(&e.fused, Some(view.rays)),
+                                    "unfused": measurement(&e.unfused, Some(view.rays)),
+                                    "dpp_over_engine": match (own, rate) {
+                                        (Some(own), Some(rate)) => json!(mrays(view.rays, own) / rate),
+                                        _ => Value::Null,
+                                    },
+                                    "hits_dpp": e.hits_dpp,
+                                    "hits_engine": e.hits_engine,
+                                    "same_triangle": e.same_triangle,
+                                    "ties": e.ties,
+                                    "hit_mismatches": e.mismatches.iter().map(|&(pixel, dpp_prim, dpp_t, prim, t)| json!({
+                                        "x": pixel % report_width,
+                                        "y": pixel / report_width,
+                                        "dpp_prim": dpp_prim,
+                                        "dpp_t": finite(dpp_t),
+                                        "engine_prim": prim,
+                                        "engine_t": finite(t),
+                                    })).collect::<Vec<_>>(),
+                                    "agree": e.agrees(),
+                                })
+                            }).collect::<Vec<_>>(),
+                        })
+                    })
+                    .collect();
+                json!({
+                    "name": scene.name,
+                    "triangles": scene.triangles,
+                    "load_ms": scene.load_ms,
+                    "normals_ms": scene.normals_ms,
+                    "bvh_build_ms": scene.bvh_ms,
+                    "embree_build_ms": scene.embree_build_ms,
+                    "views": views,
+                })
+            })
+            .collect();
+        json!({
+            "cpu": self.cpu,
+            "threads": self.threads,
+            "size": [self.size.0, self.size.1],
+            "warmup_rounds": self.warmup,
+            "measured_rounds": self.rounds,
+            "dpp_version": env!("CARGO_PKG_VERSION"),
+            "scenes": scenes,
+        })
+    }
+}

@@ -1,0 +1,255 @@
+//! `dpp bench` as a user runs it: the markdown tables, the JSON file and the
+//! chart of a tiny run on the built-in scene, and its answers to bad input.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn dpp(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dpp"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("dpp runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn pipelines() -> String {
+    common::repo().join("pipelines").display().to_string()
+}
+
+/// Every number under `value` (recursively) with its path.
+fn numbers(value: &serde_json::Value, path: &str, out: &mut Vec<(String, f64)>) {
+    match value {
+        serde_json::Value::Number(n) => out.push((path.to_string(), n.as_f64().unwrap())),
+        serde_json::Value::Array(items) => {
+            for (i, item) in items.iter().enumerate() {
+                numbers(item, &format!("{path}[{i}]"), out);
+            }
+        }
+        serde_json::Value::Object(fields) => {
+            for (name, item) in fields {
+                numbers(item, &format!("{path}.{name}"), out);
+            }
+        }
+        _ => {}
+    }
+}
+
+#[test]
+fn a_tiny_bench_writes_tables_json_and_a_chart() {
+    let dir = tempfile::tempdir().unwrap();
+    let output = dpp(
+        &[
+            "bench",
+            "builtin:16",
+            "--size",
+            "48x32",
+            "--views",
+            "front,zoom",
+            "--warmup",
+            "0",
+            "--rounds",
+            "1",
+            "--threads",
+            "2",
+            "--pipelines",
+            &pipelines(),
+            "--markdown",
+            "bench.md",
+            "--json",
+            "bench.json",
+            "--chart",
+            "bench.png",
+        ],
+        dir.path(),
+    );
+    let stdout = text(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{}\n{stdout}",
+        text(&output.stderr)
+    );
+    // Progress goes to a terminal only: nothing on stderr here.
+    assert_eq!(text(&output.stderr), "");
+
+    let markdown = std::fs::read_to_string(dir.path().join("bench.md")).unwrap();
+    assert_eq!(markdown, stdout, "the markdown file is what stdout shows");
+    for heading in [
+        "## Scenes",
+        "## WORKLOAD1 (primary rays), Mrays/s",
+        "## WORKLOAD2 and WORKLOAD3, frames per second",
+        "## Time per stage",
+    ] {
+        assert!(markdown.contains(heading), "{heading} missing:\n{markdown}");
+    }
+    assert!(
+        !markdown.contains("Embree"),
+        "no engine comparison without --engine embree"
+    );
+    // A table row per view of WORKLOAD1, and one per view of WORKLOAD2 and 3.
+    assert_eq!(markdown.matches("| builtin:16 | front | 1536 |").count(), 1);
+    assert_eq!(
+        markdown.matches("| builtin:16 | zoom | WORKLOAD").count(),
+        2
+    );
+    for row in markdown.lines().filter(|l| l.starts_with("| builtin:16")) {
+        let cells = row.split('|').count();
+        assert!(cells >= 7, "{row}");
+    }
+    // The unfused WORKLOAD1 plan has `map<intersect>` as a stage of its own.
+    assert!(markdown.contains("| 3 | `map<intersect>` |"), "{markdown}");
+
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["threads"], 2);
+    assert_eq!(json["size"], serde_json::json!([48, 32]));
+    let scene = &json["scenes"][0];
+    assert_eq!(scene["name"], "builtin:16");
+    assert_eq!(scene["views"].as_array().unwrap().len(), 2);
+    let view = &scene["views"][0];
+    assert_eq!(view["view"], "front");
+    assert_eq!(view["primary_rays"], 1536);
+    let workloads = view["workloads"].as_array().unwrap();
+    assert_eq!(
+        workloads
+            .iter()
+            .map(|w| w["workload"].as_u64().unwrap())
+            .collect::<Vec<_>>(),
+        [1, 2, 3]
+    );
+    let w1 = &workloads[0];
+    assert!(w1["unfused"]["intersect_mrays_per_s"].as_f64().unwrap() > 0.0);
+    assert!(w1["fused"]["frame_mrays_per_s"].as_f64().unwrap() > 0.0);
+    assert_eq!(w1["fused"]["frames_ms"].as_array().unwrap().len(), 1);
+    assert!(w1["unfused"]["stages"].as_array().unwrap().len() > 3);
+    let mut all = Vec::new();
+    numbers(&json, "", &mut all);
+    assert!(all.len() > 50);
+    for (path, value) in &all {
+        // Counts of rounds, and the time of an empty step, may be zero.
+        let may_be_zero = path.ends_with("warmup_rounds")
+            || path.ends_with("normals_ms")
+            || path.ends_with("].ms");
+        assert!(value.is_finite() && *value >= 0.0, "{path} = {value}");
+        assert!(
+            may_be_zero || *value > 0.0,
+            "{path} = {value} is not positive"
+        );
+    }
+    let timings = all
+        .iter()
+        .filter(|(path, _)| path.ends_with("].ms"))
+        .map(|(_, v)| v);
+    assert!(timings.sum::<f64>() > 0.0);
+
+    let chart = image::open(dir.path().join("bench.png")).unwrap();
+    assert!(chart.width() >= 640 && chart.height() == 480);
+    // Labels and bars make it more than a blank page.
+    let rgb = chart.to_rgb8();
+    let dark = rgb.pixels().filter(|p| p.0.iter().all(|&c| c < 60)).count();
+    let blue = rgb.pixels().filter(|p| p.0 == [0x1f, 0x77, 0xb4]).count();
+    assert!(dark > 200, "{dark} dark pixels: no text?");
+    assert!(blue > 100, "{blue} bar pixels");
+}
+
+#[test]
+fn bad_bench_input_is_exit_status_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let pipelines = pipelines();
+    let base = ["bench", "--pipelines", &pipelines];
+    let cases: &[(&[&str], &str)] = &[
+        (&["missing.ply"], "scene `missing.ply` is not a file"),
+        (&["--views", "side"], "unknown view `side`"),
+        (&["--engine", "optix"], "unknown engine `optix`"),
+        (&["--workloads", "4"], "unknown workload `4`"),
+        (&["--rounds", "0"], "--rounds must be at least 1"),
+        (&["builtin:3"], "resolution must be in 8..=512"),
+        (&["rm:1,2"], "rm:X,Y,Z"),
+        (&["--size", "0x10"], "is empty"),
+    ];
+    for (args, expected) in cases {
+        let mut all: Vec<&str> = base.to_vec();
+        all.extend_from_slice(args);
+        let output = dpp(&all, dir.path());
+        let stderr = text(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+    }
+    // A file that is not a mesh.
+    std::fs::write(dir.path().join("notes.txt"), "hello").unwrap();
+    let mut all: Vec<&str> = base.to_vec();
+    all.push("notes.txt");
+    let output = dpp(&all, dir.path());
+    assert_eq!(output.status.code(), Some(2));
+    assert!(text(&output.stderr).contains("dpp reads .obj and .ply meshes"));
+    // Embree without the feature, or without WORKLOAD1.
+    let mut all: Vec<&str> = base.to_vec();
+    all.extend_from_slice(&["--engine", "dpp,embree", "--workloads", "2"]);
+    let output = dpp(&all, dir.path());
+    assert_eq!(output.status.code(), Some(2));
+    let expected = if cfg!(feature = "embree") {
+        "add 1 to --workloads"
+    } else {
+        "built without Embree"
+    };
+    assert!(
+        text(&output.stderr).contains(expected),
+        "{}",
+        text(&output.stderr)
+    );
+}
+
+#[test]
+fn a_ply_mesh_runs_through_workload1() {
+    let dir = tempfile::tempdir().unwrap();
+    // A unit square facing the camera, as binary little-endian PLY with a scalar.
+    let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement vertex 4\n\
+property float x\nproperty float y\nproperty float z\nproperty float intensity\n\
+element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        .to_vec();
+    for [x, y] in [[0.0f32, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]] {
+        for value in [x, y, 0.0, x + y] {
+            bytes.extend(value.to_le_bytes());
+        }
+    }
+    bytes.push(4);
+    for index in [0i32, 1, 2, 3] {
+        bytes.extend(index.to_le_bytes());
+    }
+    std::fs::write(dir.path().join("square.ply"), &bytes).unwrap();
+    let workload1 = common::repo().join("pipelines/workload1.dpp");
+    let output = dpp(
+        &[
+            "run",
+            workload1.to_str().unwrap(),
+            "square.ply",
+            "--size",
+            "16x16",
+            "-o",
+            "square.png",
+        ],
+        dir.path(),
+    );
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    assert!(dir.path().join("square.png").is_file());
+    // A truncated copy is bad input.
+    std::fs::write(dir.path().join("cut.ply"), &bytes[..bytes.len() - 5]).unwrap();
+    let output = dpp(
+        &[
+            "run",
+            workload1.to_str().unwrap(),
+            "cut.ply",
+            "--size",
+            "8x8",
+        ],
+        dir.path(),
+    );
+    assert_eq!(output.status.code(), Some(2));
+    assert!(text(&output.stderr).contains("cut.ply: malformed PLY"));
+}
