@@ -37,3 +37,124 @@ pub fn pipeline_name(path: &Path) -> String {
         .to_string_lossy()
         .replace('/', ".")
 }
+
+/// A floor (`floor`), a box standing on it (`box`) and a mirror behind it
+/// (`mirror`, reflectivity 0.8), in that order.
+pub const SCENE_OBJ: &str = "\
+mtllib scene.mtl
+usemtl floor
+v -2 0 -2
+v -2 0 2
+v 2 0 2
+v 2 0 -2
+f 1 2 3 4
+usemtl box
+v -0.4 0 -0.4
+v 0.4 0 -0.4
+v 0.4 0.8 -0.4
+v -0.4 0.8 -0.4
+v -0.4 0 0.4
+v 0.4 0 0.4
+v 0.4 0.8 0.4
+v -0.4 0.8 0.4
+f 5 8 7 6
+f 9 10 11 12
+f 5 6 10 9
+f 8 12 11 7
+f 5 9 12 8
+f 6 7 11 10
+usemtl mirror
+v -1.5 0 -1.5
+v 1.5 0 -1.5
+v 1.5 1.5 -1.5
+v -1.5 1.5 -1.5
+f 13 14 15 16
+";
+
+pub const SCENE_MTL: &str = "\
+newmtl floor
+Kd 0.8 0.8 0.8
+Ks 0.1 0.1 0.1
+Ns 16
+newmtl box
+Kd 0.9 0.45 0.3
+Ks 0.5 0.5 0.5
+Ns 64
+newmtl mirror
+Kd 0.2 0.2 0.2
+Ks 0.9 0.9 0.9
+Ns 128
+refl 0.8
+";
+
+/// Camera and lighting of the small scene: seen from the front and above, one
+/// light up and to the left, a light grey colour map (the scalar is the height).
+pub const SCENE_VIEW: &[&str] = &[
+    "--eye",
+    "0.3,2.2,4",
+    "--look-at",
+    "0,0.4,-0.3",
+    "--light=-2.5,3,1.5,1.5",
+    "--colormap",
+    "grey",
+    "--scalar-range=-8,1",
+];
+
+/// An 8-bit sRGB image read from a PNG.
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub rgb: Vec<u8>,
+}
+
+impl Image {
+    pub fn load(path: &Path) -> Image {
+        let image = image::open(path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+            .to_rgb8();
+        Image {
+            width: image.width(),
+            height: image.height(),
+            rgb: image.into_raw(),
+        }
+    }
+
+    /// Linear-light luminance of pixel `i` (the PNG holds sRGB).
+    pub fn luminance(&self, i: usize) -> f32 {
+        let linear = |c: u8| {
+            let c = c as f32 / 255.0;
+            if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            }
+        };
+        let p = &self.rgb[3 * i..3 * i + 3];
+        0.2126 * linear(p[0]) + 0.7152 * linear(p[1]) + 0.0722 * linear(p[2])
+    }
+
+    pub fn pixels(&self) -> usize {
+        (self.width * self.height) as usize
+    }
+}
+
+/// A scratch folder holding the small scene.
+pub fn scene_dir() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("scene.obj"), SCENE_OBJ).unwrap();
+    std::fs::write(dir.path().join("scene.mtl"), SCENE_MTL).unwrap();
+    dir
+}
+
+/// Mean FLIP error (0 for identical images, at most 1).
+pub fn mean_flip(reference: &Image, test: &Image) -> f32 {
+    assert_eq!(
+        (reference.width, reference.height),
+        (test.width, test.height)
+    );
+    let reference =
+        nv_flip::FlipImageRgb8::with_data(reference.width, reference.height, &reference.rgb);
+    let test = nv_flip::FlipImageRgb8::with_data(test.width, test.height, &test.rgb);
+    let error = nv_flip::flip(reference, test, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
+    nv_flip::FlipPool::from_image(&error).mean()
+}

@@ -3,6 +3,9 @@
 use crate::builtin_scene::{builtin_scene, ResolutionOutOfRange};
 use crate::bvh::Bvh;
 use crate::camera::CameraSetup;
+use crate::functors::wgsl::buffers::{
+    ArcKeyedCache, BuiltOnce, CameraGpuBuffers, SceneGpuBuffers, ShadingGpuBuffers,
+};
 use crate::mesh::{Bounds, MeshError, TriangleMesh};
 use crate::obj::{load_obj_with_materials, ObjError};
 use crate::shading::{MeshMaterials, Shading};
@@ -39,6 +42,9 @@ pub struct TraceScene {
     pub bounds: Bounds,
     /// The material table (entry 0 the default) and each triangle's material.
     pub materials: MeshMaterials,
+    /// The fields above in the WGSL twins' layouts, built on first use (a
+    /// scene is not changed once built).
+    gpu_buffers: BuiltOnce<SceneGpuBuffers>,
 }
 
 impl TraceScene {
@@ -70,6 +76,7 @@ impl TraceScene {
             bvh,
             bounds,
             materials,
+            gpu_buffers: BuiltOnce::default(),
         })
     }
 
@@ -93,6 +100,11 @@ impl TraceScene {
             .copied()
             .unwrap_or(0)
     }
+
+    /// The mesh and BVH as the GPU twins read them, built once.
+    pub fn gpu_buffers(&self) -> &SceneGpuBuffers {
+        self.gpu_buffers.get_or_init(|| SceneGpuBuffers::new(self))
+    }
 }
 
 /// What the ray-tracing functors find in [`dpp_runtime::CallContext::resources`].
@@ -102,6 +114,10 @@ pub struct TraceResources {
     pub camera: Arc<CameraSetup>,
     /// Materials, lights, colour map: [`Shading::for_scene`] unless the user changed them.
     pub shading: Arc<Shading>,
+    /// GPU buffers of `camera` and `shading`, kept while those `Arc`s are the
+    /// ones in the fields (set-up replaces them, e.g. through `Arc::make_mut`).
+    camera_gpu_buffers: ArcKeyedCache<CameraSetup, CameraGpuBuffers>,
+    shading_gpu_buffers: ArcKeyedCache<Shading, ShadingGpuBuffers>,
 }
 
 impl TraceResources {
@@ -112,7 +128,21 @@ impl TraceResources {
             scene,
             camera,
             shading,
+            camera_gpu_buffers: ArcKeyedCache::new(),
+            shading_gpu_buffers: ArcKeyedCache::new(),
         }
+    }
+
+    /// The camera frame and pixel order as the GPU twins read them.
+    pub fn camera_gpu_buffers(&self) -> CameraGpuBuffers {
+        self.camera_gpu_buffers
+            .get_or_build(&self.camera, CameraGpuBuffers::new)
+    }
+
+    /// Materials, lights and colour map as the GPU twins read them.
+    pub fn shading_gpu_buffers(&self) -> ShadingGpuBuffers {
+        self.shading_gpu_buffers
+            .get_or_build(&self.shading, ShadingGpuBuffers::new)
     }
 
     /// The uniforms of this scene, camera and shading (see [`crate::uniforms`]).

@@ -1,7 +1,9 @@
 //! `alive(ray: Ray) -> (alive: bool)`: `tmax > 0` (false for NaN), the mask a
 //! pipeline compacts its rays with.
 
+use crate::functors::wgsl::{twin, vector_module, TwinParts};
 use crate::functors::RayColumns;
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     RecordId, Signature, TypePattern,
@@ -35,6 +37,17 @@ impl Alive {
 impl Functor for Alive {
     fn signature(&self) -> &Signature {
         &self.signature
+    }
+
+    /// `twin.wgsl`: `tmax > 0` on the bits.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let parts = TwinParts {
+            constants: Vec::new(),
+            modules: vec![vector_module()],
+            buffers: Vec::new(),
+            failures: Vec::new(),
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }
 
     fn run_cpu(

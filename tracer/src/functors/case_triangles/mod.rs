@@ -3,6 +3,8 @@
 //! ([`crate::functors::isosurface::tables`]).
 
 use crate::functors::isosurface::tables::tables;
+use crate::functors::wgsl::{marching_cubes_module, twin, TwinParts};
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     Signature, TypePattern,
@@ -42,6 +44,17 @@ impl Default for CaseTriangles {
 impl Functor for CaseTriangles {
     fn signature(&self) -> &Signature {
         &self.signature
+    }
+
+    /// `twin.wgsl`, reading the generated tables.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let parts = TwinParts {
+            constants: Vec::new(),
+            modules: vec![marching_cubes_module()],
+            buffers: Vec::new(),
+            failures: vec!["caseTriangles: a case is not a marching-cubes case (0..255)".into()],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }
 
     fn run_cpu(

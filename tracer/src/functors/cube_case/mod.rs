@@ -3,7 +3,10 @@
 //! is set when corner `n` (at offset `(n & 1, n >> 1 & 1, n >> 2 & 1)`) is below
 //! `level`. Used as `iota(volume.cells) → map<cubeCase>(level: level)`.
 
+use crate::functors::isosurface::VolumeResources;
 use crate::functors::isosurface::{case_index, cell_origin, corner_values, level, run_volume};
+use crate::functors::wgsl::{request_resources, twin, vector_module, volume_module, TwinParts};
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     HostType, NamedParam, Signature, TypePattern,
@@ -48,6 +51,23 @@ impl Default for CubeCase {
 impl Functor for CubeCase {
     fn signature(&self) -> &Signature {
         &self.signature
+    }
+
+    /// `twin.wgsl`, reading the volume, built once per volume.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let volume = request_resources::<VolumeResources>(request, "cubeCase")?
+            .gpu_buffers()
+            .map_err(|e| FunctorError(format!("cubeCase: {e}")))?;
+        let parts = TwinParts {
+            constants: Vec::new(),
+            modules: vec![vector_module(), volume_module(&volume)],
+            buffers: Vec::new(),
+            failures: vec![
+                "cubeCase: level must be a finite number".into(),
+                "cubeCase: a cell index is past the volume's last cell".into(),
+            ],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }
 
     fn run_cpu(

@@ -11,10 +11,15 @@
 //! [`crate::functors::isosurface`] for the conventions.
 
 use crate::functors::isosurface::tables::tables;
+use crate::functors::isosurface::VolumeResources;
 use crate::functors::isosurface::{
     case_index, cell_origin, corner_values, edge_vertex, level, run_volume, TriangleRecord,
     TriangleWriter,
 };
+use crate::functors::wgsl::{
+    marching_cubes_module, request_resources, twin, vector_module, volume_module, TwinParts,
+};
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     HostType, NamedParam, RecordId, Signature, TypePattern,
@@ -59,6 +64,28 @@ impl CubeTriangle {
 impl Functor for CubeTriangle {
     fn signature(&self) -> &Signature {
         &self.signature
+    }
+
+    /// `twin.wgsl`, reading the volume (built once per volume) and the tables.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let volume = request_resources::<VolumeResources>(request, "cubeTriangle")?
+            .gpu_buffers()
+            .map_err(|e| FunctorError(format!("cubeTriangle: {e}")))?;
+        let parts = TwinParts {
+            constants: Vec::new(),
+            modules: vec![
+                vector_module(),
+                volume_module(&volume),
+                marching_cubes_module(),
+            ],
+            buffers: Vec::new(),
+            failures: vec![
+                "cubeTriangle: level must be a finite number".into(),
+                "cubeTriangle: a cell index is past the volume's last cell".into(),
+                "cubeTriangle: a lane is past the cell's triangles at this level".into(),
+            ],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }
 
     fn run_cpu(

@@ -2,8 +2,13 @@
 //! `0 < t < ray.tmax`, triangles named in input file order. Dead rays (`tmax <=
 //! 0`) miss without a traversal.
 
+use crate::functors::wgsl::{
+    bvh_module, request_resources, stack_overflow_failure, twin, vector_module, TwinParts,
+};
+use crate::functors::MISS_PRIM;
 use crate::functors::{hit_fields, record_fields_mut, RayColumns};
 use crate::scene::TraceResources;
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     RecordId, Signature, TypePattern,
@@ -39,6 +44,18 @@ impl Functor for Intersect {
         &self.signature
     }
 
+    /// `twin.wgsl`: the CPU's traversal on the scene's BVH, built once per scene.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let scene = &request_resources::<TraceResources>(request, "intersect")?.scene;
+        let parts = TwinParts {
+            constants: vec![("MISS_PRIM", format!("{MISS_PRIM}u"))],
+            modules: vec![vector_module(), bvh_module(scene.gpu_buffers())],
+            buffers: Vec::new(),
+            failures: vec![stack_overflow_failure("intersect")],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
+    }
+
     fn run_cpu(
         &self,
         ctx: &CallContext<'_>,
@@ -58,19 +75,18 @@ impl Functor for Intersect {
         prim.reserve(rays.len());
         u.reserve(rays.len());
         v.reserve(rays.len());
-        for index in 0..rays.len() {
-            let ray = rays.get(index);
-            let hit = if ray.tmax > 0.0 {
-                bvh.intersect_closest(&ray)
-            } else {
-                None
-            };
-            let (hit_t, hit_prim, hit_u, hit_v) = hit_fields(hit);
-            t.push(hit_t);
-            prim.push(hit_prim);
-            u.push(hit_u);
-            v.push(hit_v);
-        }
+        // Dead rays (tmax <= 0) miss without a traversal.
+        bvh.intersect_closest_batch(
+            rays.len(),
+            |index| rays.get(index),
+            |hit| {
+                let (hit_t, hit_prim, hit_u, hit_v) = hit_fields(hit);
+                t.push(hit_t);
+                prim.push(hit_prim);
+                u.push(hit_u);
+                v.push(hit_v);
+            },
+        );
         Ok(())
     }
 }

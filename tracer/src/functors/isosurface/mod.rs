@@ -38,6 +38,7 @@ pub mod tables;
 
 pub use mesh::{triangles_to_mesh, write_obj, write_ply, NotTriangles, TriangleColumns};
 
+use crate::functors::wgsl::buffers::{ArcKeyedCache, VolumeGpuBuffers};
 use crate::functors::{case_triangles, cube_case, cube_triangle, record_fields_mut};
 use crate::volume::Volume;
 use dpp_runtime::{
@@ -52,6 +53,24 @@ use tables::{corner_offset, EDGES};
 #[derive(Clone, Debug)]
 pub struct VolumeResources {
     pub volume: Arc<Volume>,
+}
+
+/// The GPU buffers of each live volume twins were built for. Process-wide and
+/// keyed by the volume's `Arc`, because users build [`VolumeResources`] with a
+/// struct literal, which leaves it no room for a cache of its own.
+static VOLUME_GPU_BUFFERS: ArcKeyedCache<Volume, VolumeGpuBuffers> = ArcKeyedCache::new();
+
+impl VolumeResources {
+    /// The volume as the WGSL twins read it, built once per volume.
+    pub fn gpu_buffers(&self) -> Result<VolumeGpuBuffers, FunctorError> {
+        VOLUME_GPU_BUFFERS.get_or_try_build(&self.volume, VolumeGpuBuffers::new)
+    }
+}
+
+/// Frees the cached GPU copy of a volume that is gone (a volume can be large,
+/// and a run traces its isosurface after dropping it).
+pub(crate) fn release_gpu_buffers_of_dropped_volumes() {
+    VOLUME_GPU_BUFFERS.release_orphans();
 }
 
 /// The `volume.*` uniforms: `(record, field, type)`.

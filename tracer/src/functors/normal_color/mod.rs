@@ -2,8 +2,12 @@
 //! normal, turned to face the viewer, as RGB `n * 0.5 + 0.5`; a dark background on
 //! a miss. A picture of the geometry without any lighting.
 
+use crate::functors::wgsl::{
+    mesh_module, request_resources, twin, vec3_literal, vector_module, TwinParts,
+};
 use crate::functors::{HitColumns, RayColumns, MISS_PRIM};
 use crate::scene::TraceResources;
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     RecordId, Signature, TypePattern,
@@ -47,6 +51,21 @@ impl NormalColor {
 impl Functor for NormalColor {
     fn signature(&self) -> &Signature {
         &self.signature
+    }
+
+    /// `twin.wgsl`, reading the scene's triangles, built once per scene.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let scene = &request_resources::<TraceResources>(request, "normalColor")?.scene;
+        let parts = TwinParts {
+            constants: vec![
+                ("MISS_PRIM", format!("{MISS_PRIM}u")),
+                ("BACKGROUND", vec3_literal(BACKGROUND)),
+            ],
+            modules: vec![vector_module(), mesh_module(scene.gpu_buffers())],
+            buffers: Vec::new(),
+            failures: vec!["normalColor: a hit names a triangle the scene does not have".into()],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }
 
     fn run_cpu(

@@ -13,9 +13,13 @@
 //! of chunking and thread count. Non-hit surfaces (and `range <= 0`) give dead
 //! rays, which `occluded` reports as not blocked.
 
+use crate::functors::wgsl::{
+    random_module, sampling_module, surface_module, twin, vector_module, TwinParts,
+};
 use crate::functors::{
     named_f32, scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON,
 };
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
@@ -56,6 +60,26 @@ impl OccRayGen {
 impl Functor for OccRayGen {
     fn signature(&self) -> &Signature {
         &self.signature
+    }
+
+    /// `twin.wgsl`: the same hashed random numbers and hemisphere mapping.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let parts = TwinParts {
+            constants: Vec::new(),
+            modules: vec![
+                vector_module(),
+                random_module(),
+                sampling_module(),
+                surface_module(),
+            ],
+            buffers: Vec::new(),
+            failures: vec![
+                "occRayGen: range must be a finite number".into(),
+                "occRayGen: the scene.diagonal uniform is not a positive number (no scene loaded?)"
+                    .into(),
+            ],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }
 
     fn run_cpu(

@@ -2,8 +2,12 @@
 //! `0 < t < ray.tmax` (any hit; traversal stops at the first one). Dead rays
 //! (`tmax <= 0`) are never blocked.
 
+use crate::functors::wgsl::{
+    bvh_module, request_resources, stack_overflow_failure, twin, vector_module, TwinParts,
+};
 use crate::functors::RayColumns;
 use crate::scene::TraceResources;
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     RecordId, Signature, TypePattern,
@@ -39,6 +43,18 @@ impl Functor for Occluded {
         &self.signature
     }
 
+    /// `twin.wgsl`: the CPU's any-hit traversal on the scene's BVH, built once per scene.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let scene = &request_resources::<TraceResources>(request, "occluded")?.scene;
+        let parts = TwinParts {
+            constants: Vec::new(),
+            modules: vec![vector_module(), bvh_module(scene.gpu_buffers())],
+            buffers: Vec::new(),
+            failures: vec![stack_overflow_failure("occluded")],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
+    }
+
     fn run_cpu(
         &self,
         ctx: &CallContext<'_>,
@@ -49,10 +65,8 @@ impl Functor for Occluded {
         let rays = RayColumns::new(&inputs[0]);
         let blocked = outputs[0].as_bool_mut();
         blocked.reserve(rays.len());
-        for index in 0..rays.len() {
-            let ray = rays.get(index);
-            blocked.push(ray.tmax > 0.0 && bvh.occluded(&ray, ray.tmax));
-        }
+        // Dead rays (tmax <= 0) are never blocked.
+        bvh.occluded_batch(rays.len(), |index| rays.get(index), |hit| blocked.push(hit));
         Ok(())
     }
 }

@@ -12,8 +12,10 @@
 //! 0`, zero weight), so with `maxDepth` the pipeline traces at most `maxDepth`
 //! segments per camera ray (the camera ray included).
 
+use crate::functors::wgsl::{request_resources, surface_module, twin, vector_module, TwinParts};
 use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
 use crate::scene::TraceResources;
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
@@ -53,6 +55,23 @@ impl Reflect {
 impl Functor for Reflect {
     fn signature(&self) -> &Signature {
         &self.signature
+    }
+
+    /// `twin.wgsl`, reading the materials, built once per shading set-up.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let shading =
+            request_resources::<TraceResources>(request, "reflect")?.shading_gpu_buffers();
+        let parts = TwinParts {
+            constants: Vec::new(),
+            modules: vec![vector_module(), surface_module()],
+            buffers: vec![shading.materials],
+            failures: vec![
+                "reflect: the scene.diagonal uniform is not a positive number (no scene loaded?)"
+                    .into(),
+                "reflect: a surface has a material the scene does not have".into(),
+            ],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }
 
     fn run_cpu(

@@ -11,8 +11,10 @@
 //! the shader does not light anyway), gives a dead ray (`tmax = 0`), which
 //! `occluded` reports as not blocked.
 
+use crate::functors::wgsl::{request_resources, surface_module, twin, vector_module, TwinParts};
 use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
 use crate::scene::TraceResources;
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     RecordId, Signature, TypePattern,
@@ -46,6 +48,24 @@ impl ShadowRay {
 impl Functor for ShadowRay {
     fn signature(&self) -> &Signature {
         &self.signature
+    }
+
+    /// `twin.wgsl`, reading the lights, built once per shading set-up.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let shading =
+            request_resources::<TraceResources>(request, "shadowRay")?.shading_gpu_buffers();
+        let parts = TwinParts {
+            constants: Vec::new(),
+            modules: vec![vector_module(), surface_module()],
+            buffers: vec![shading.lights],
+            failures: vec![
+                "shadowRay: the fanout is not the scene's number of lights; use fanout: scene.lights"
+                    .into(),
+                "shadowRay: the scene.diagonal uniform is not a positive number (no scene loaded?)"
+                    .into(),
+            ],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }
 
     fn run_cpu(

@@ -4,7 +4,9 @@
 //! the mask is set when light `j` is *not* blocked. At most 32 lights (the scene
 //! set-up refuses more).
 
+use crate::functors::wgsl::{twin, TwinParts};
 use crate::shading::MAX_LIGHTS;
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     Signature, TypePattern,
@@ -39,6 +41,19 @@ impl VisibleLights {
 impl Functor for VisibleLights {
     fn signature(&self) -> &Signature {
         &self.signature
+    }
+
+    /// `twin.wgsl`: one bit per unblocked light of the group.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let parts = TwinParts {
+            constants: vec![("MAX_LIGHTS", format!("{MAX_LIGHTS}u"))],
+            modules: Vec::new(),
+            buffers: Vec::new(),
+            failures: vec![format!(
+                "visibleLights: the group must be 1 to {MAX_LIGHTS} lights (a mask holds {MAX_LIGHTS})"
+            )],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }
 
     fn run_cpu(

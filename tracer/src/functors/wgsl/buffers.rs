@@ -1,0 +1,399 @@
+//! Scene data in the layouts the WGSL twins read, built once per scene,
+//! camera, shading set-up or volume and handed out as clones of the same
+//! `Arc`s (a backend uploads each once). Every buffer is 32-bit words; `vec4`
+//! layouts keep 16-byte strides.
+//!
+//! | name | WGSL type | words |
+//! |---|---|---|
+//! | `tracer_bvh_nodes` | `array<vec4<f32>>` | [`Bvh::nodes`] as they are: 4 per node, per child `(min.xyz, bits of index)`, `(max.xyz, bits of count)` |
+//! | `tracer_bvh_triangles` | `array<f32>` | [`Bvh::triangles`] as they are: 9 per leaf-order triangle |
+//! | `tracer_bvh_triangle_ids` | `array<u32>` | [`Bvh::triangle_ids`]: file-order id per leaf-order triangle |
+//! | `tracer_mesh_triangles` | `array<vec4<u32>>` | per file-order triangle: vertex indices, material id |
+//! | `tracer_mesh_vertices` | `array<vec4<f32>>` | 2 per vertex: `(position, scalar)`, `(normal, 0)` |
+//! | `tracer_shading_constants` | `array<vec4<f32>>` | `(min, max, 1 / (max - min), 0)` of the scalar range, `(background, 0)` (linear) |
+//! | `tracer_colormap` | `array<vec4<f32>>` | 256 linear colours `(r, g, b, 0)` |
+//! | `tracer_materials` | `array<vec4<f32>>` | 2 per material: `(Kd, Ns)`, `(Ks, reflectivity)` |
+//! | `tracer_lights` | `array<vec4<f32>>` | 2 per light: `(position, intensity)`, `(colour, 0)` |
+//! | `tracer_camera` | `array<vec4<f32>>` | `(eye, tan(fov/2))`, `(forward, aspect)`, `(right, width)`, `(true up, height)` |
+//! | `tracer_camera_morton_pixels` | `array<u32>` | [`CameraSetup::morton_pixels`] |
+//! | `tracer_volume_grid` | `array<vec4<u32>>` | `(dims, cell count)`, bits of `(origin, 0)`, bits of `(spacing, 0)` |
+//! | `tracer_volume_values` | `array<f32>` | the samples, x fastest |
+//! | `tracer_mc_case_triangle_counts` | `array<u32>` | 256 triangle counts |
+//! | `tracer_mc_case_triangles` | `array<u32>` | 5 per case: `e0 \| e1 << 8 \| e2 << 16` |
+//! | `tracer_mc_edge_corners` | `array<u32>` | 12: `lo \| hi << 8` |
+
+use crate::bvh::Bvh;
+use crate::camera::{Camera, CameraSetup};
+use crate::functors::isosurface::tables::{tables, EDGES, MAX_CELL_TRIANGLES};
+use crate::scene::TraceScene;
+use crate::shading::Shading;
+use crate::volume::Volume;
+use dpp_runtime::wgsl::GpuBuffer;
+use dpp_runtime::FunctorError;
+use glam::Vec3;
+use std::fmt;
+use std::sync::{Arc, Mutex, OnceLock, PoisonError, Weak};
+
+fn buffer(name: &'static str, wgsl_type: &'static str, words: Vec<u32>) -> GpuBuffer {
+    GpuBuffer {
+        name,
+        wgsl_type,
+        data: Arc::from(words),
+    }
+}
+
+/// `(x, y, z, w)` as the words of a `vec4<f32>`.
+fn vec4_words(xyz: Vec3, w: f32) -> [u32; 4] {
+    [xyz.x, xyz.y, xyz.z, w].map(f32::to_bits)
+}
+
+/// The mesh and its BVH ([`crate::bvh`] layouts as they are).
+#[derive(Clone, Debug)]
+pub struct SceneGpuBuffers {
+    pub bvh_nodes: GpuBuffer,
+    pub bvh_triangles: GpuBuffer,
+    pub bvh_triangle_ids: GpuBuffer,
+    pub mesh_triangles: GpuBuffer,
+    pub mesh_vertices: GpuBuffer,
+}
+
+impl SceneGpuBuffers {
+    pub fn new(scene: &TraceScene) -> SceneGpuBuffers {
+        let bvh: &Bvh = &scene.bvh;
+        let mesh = &scene.mesh;
+        let mesh_triangles = mesh
+            .triangles
+            .iter()
+            .enumerate()
+            .flat_map(|(prim, &[a, b, c])| [a, b, c, scene.triangle_material(prim as u32)])
+            .collect();
+        // A mesh without normals interpolates to zero (the face normal is used);
+        // without scalars the scalar is y, whose interpolation is the hit's y
+        // computed as the CPU computes it.
+        let mesh_vertices = mesh
+            .positions
+            .iter()
+            .enumerate()
+            .flat_map(|(vertex, &position)| {
+                let normal = mesh.normals.as_ref().map_or(Vec3::ZERO, |n| n[vertex]);
+                let scalar = mesh.scalars.as_ref().map_or(position.y, |s| s[vertex]);
+                let [p0, p1, p2, p3] = vec4_words(position, scalar);
+                let [n0, n1, n2, n3] = vec4_words(normal, 0.0);
+                [p0, p1, p2, p3, n0, n1, n2, n3]
+            })
+            .collect();
+        SceneGpuBuffers {
+            bvh_nodes: buffer("tracer_bvh_nodes", "array<vec4<f32>>", bvh.gpu_node_words()),
+            bvh_triangles: buffer(
+                "tracer_bvh_triangles",
+                "array<f32>",
+                bvh.gpu_triangle_words(),
+            ),
+            bvh_triangle_ids: buffer(
+                "tracer_bvh_triangle_ids",
+                "array<u32>",
+                bvh.triangle_ids().to_vec(),
+            ),
+            mesh_triangles: buffer("tracer_mesh_triangles", "array<vec4<u32>>", mesh_triangles),
+            mesh_vertices: buffer("tracer_mesh_vertices", "array<vec4<f32>>", mesh_vertices),
+        }
+    }
+}
+
+/// Materials, lights, colour map, scalar range and background.
+#[derive(Clone, Debug)]
+pub struct ShadingGpuBuffers {
+    pub constants: GpuBuffer,
+    pub colormap: GpuBuffer,
+    pub materials: GpuBuffer,
+    pub lights: GpuBuffer,
+}
+
+impl ShadingGpuBuffers {
+    pub fn new(shading: &Shading) -> ShadingGpuBuffers {
+        let [low, high] = shading.scalar_range();
+        // The reciprocal as the CPU shader computes it (a GPU division may round otherwise).
+        let inverse_range = 1.0 / (high - low);
+        let mut constants = Vec::with_capacity(8);
+        constants.extend([low, high, inverse_range, 0.0].map(f32::to_bits));
+        constants.extend(vec4_words(shading.background(), 0.0));
+        let colormap = shading
+            .colormap()
+            .linear()
+            .iter()
+            .flat_map(|&color| vec4_words(color, 0.0))
+            .collect();
+        let materials = shading
+            .materials()
+            .iter()
+            .flat_map(|m| {
+                let [a, b, c, d] = vec4_words(m.kd, m.ns);
+                let [e, f, g, h] = vec4_words(m.ks, m.reflectivity);
+                [a, b, c, d, e, f, g, h]
+            })
+            .collect();
+        let lights = shading
+            .lights()
+            .iter()
+            .flat_map(|light| {
+                let [a, b, c, d] = vec4_words(light.position, light.intensity);
+                let [e, f, g, h] = vec4_words(light.color, 0.0);
+                [a, b, c, d, e, f, g, h]
+            })
+            .collect();
+        ShadingGpuBuffers {
+            constants: buffer("tracer_shading_constants", "array<vec4<f32>>", constants),
+            colormap: buffer("tracer_colormap", "array<vec4<f32>>", colormap),
+            materials: buffer("tracer_materials", "array<vec4<f32>>", materials),
+            lights: buffer("tracer_lights", "array<vec4<f32>>", lights),
+        }
+    }
+}
+
+/// The camera's frame as [`Camera::new`] computes it (its fields are private;
+/// the same glam operations on the same inputs give the same bits, which a
+/// test checks through [`Camera::direction`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraFrame {
+    pub forward: Vec3,
+    pub right: Vec3,
+    pub true_up: Vec3,
+    pub half_height: f32,
+    pub aspect: f32,
+}
+
+impl CameraFrame {
+    pub fn new(camera: &Camera) -> CameraFrame {
+        let forward = (camera.look_at - camera.eye).normalize_or_zero();
+        let right = forward.cross(camera.up).normalize_or_zero();
+        CameraFrame {
+            forward,
+            right,
+            true_up: right.cross(forward),
+            half_height: (camera.fov_degrees.to_radians() * 0.5).tan(),
+            aspect: camera.width as f32 / camera.height as f32,
+        }
+    }
+
+    /// [`Camera::direction`] on this frame, in the twin's order of operations.
+    pub fn direction(&self, camera: &Camera, x: u32, y: u32, sx: f32, sy: f32) -> Vec3 {
+        let horizontal = 2.0 * (x as f32 + sx) / camera.width as f32 - 1.0;
+        let vertical = 1.0 - 2.0 * (y as f32 + sy) / camera.height as f32;
+        (self.forward
+            + horizontal * self.half_height * self.aspect * self.right
+            + vertical * self.half_height * self.true_up)
+            .normalize()
+    }
+}
+
+/// The camera frame and the Morton order of the pixels.
+#[derive(Clone, Debug)]
+pub struct CameraGpuBuffers {
+    pub camera: GpuBuffer,
+    pub morton_pixels: GpuBuffer,
+}
+
+impl CameraGpuBuffers {
+    pub fn new(setup: &CameraSetup) -> CameraGpuBuffers {
+        let camera = &setup.camera;
+        let frame = CameraFrame::new(camera);
+        let mut words = Vec::with_capacity(16);
+        words.extend(vec4_words(camera.eye, frame.half_height));
+        words.extend(vec4_words(frame.forward, frame.aspect));
+        words.extend(vec4_words(frame.right, camera.width as f32));
+        words.extend(vec4_words(frame.true_up, camera.height as f32));
+        CameraGpuBuffers {
+            camera: buffer("tracer_camera", "array<vec4<f32>>", words),
+            morton_pixels: buffer(
+                "tracer_camera_morton_pixels",
+                "array<u32>",
+                setup.morton_pixels.clone(),
+            ),
+        }
+    }
+}
+
+/// The volume's grid and samples.
+#[derive(Clone, Debug)]
+pub struct VolumeGpuBuffers {
+    pub grid: GpuBuffer,
+    pub values: GpuBuffer,
+}
+
+impl VolumeGpuBuffers {
+    /// Fails for a volume whose samples do not match its dimensions (as the
+    /// CPU functors do) or whose sample indices do not fit the GPU's `u32`.
+    pub fn new(volume: &Volume) -> Result<VolumeGpuBuffers, FunctorError> {
+        let dims = volume.dims;
+        let samples = dims.x as u64 * dims.y as u64 * dims.z as u64;
+        if volume.values.len() as u64 != samples {
+            return Err(FunctorError(format!(
+                "the volume has {} values for {}×{}×{} samples",
+                volume.values.len(),
+                dims.x,
+                dims.y,
+                dims.z
+            )));
+        }
+        let cells = u32::try_from(volume.cell_count())
+            .ok()
+            .filter(|_| samples <= u32::MAX as u64);
+        let Some(cells) = cells else {
+            return Err(FunctorError(format!(
+                "a {}×{}×{} volume has too many samples for the GPU's 32-bit indices",
+                dims.x, dims.y, dims.z
+            )));
+        };
+        let mut grid = vec![dims.x, dims.y, dims.z, cells];
+        grid.extend(vec4_words(volume.origin, 0.0));
+        grid.extend(vec4_words(volume.spacing, 0.0));
+        let values = volume.values.iter().map(|v| v.to_bits()).collect();
+        Ok(VolumeGpuBuffers {
+            grid: buffer("tracer_volume_grid", "array<vec4<u32>>", grid),
+            values: buffer("tracer_volume_values", "array<f32>", values),
+        })
+    }
+}
+
+/// The marching-cubes tables (the same for every volume).
+#[derive(Clone, Debug)]
+pub struct MarchingCubesGpuBuffers {
+    pub case_triangle_counts: GpuBuffer,
+    pub case_triangles: GpuBuffer,
+    pub edge_corners: GpuBuffer,
+}
+
+impl MarchingCubesGpuBuffers {
+    /// Built on first use and shared by every run.
+    pub fn get() -> &'static MarchingCubesGpuBuffers {
+        static BUFFERS: OnceLock<MarchingCubesGpuBuffers> = OnceLock::new();
+        BUFFERS.get_or_init(|| {
+            let tables = tables();
+            let counts = tables.counts.iter().map(|&c| u32::from(c)).collect();
+            let triangles = tables
+                .triangles
+                .iter()
+                .flat_map(|case| {
+                    case.iter().map(|&[e0, e1, e2]| {
+                        u32::from(e0) | u32::from(e1) << 8 | u32::from(e2) << 16
+                    })
+                })
+                .collect::<Vec<u32>>();
+            debug_assert_eq!(triangles.len(), 256 * MAX_CELL_TRIANGLES);
+            let edges = EDGES
+                .iter()
+                .map(|&[lo, hi]| u32::from(lo) | u32::from(hi) << 8)
+                .collect();
+            MarchingCubesGpuBuffers {
+                case_triangle_counts: buffer(
+                    "tracer_mc_case_triangle_counts",
+                    "array<u32>",
+                    counts,
+                ),
+                case_triangles: buffer("tracer_mc_case_triangles", "array<u32>", triangles),
+                edge_corners: buffer("tracer_mc_edge_corners", "array<u32>", edges),
+            }
+        })
+    }
+}
+
+/// A value built on first use; `Debug` shows only whether it is built (GPU
+/// words are long).
+#[derive(Clone)]
+pub struct BuiltOnce<T>(OnceLock<T>);
+
+impl<T> Default for BuiltOnce<T> {
+    fn default() -> Self {
+        BuiltOnce(OnceLock::new())
+    }
+}
+
+impl<T> BuiltOnce<T> {
+    pub fn get_or_init(&self, build: impl FnOnce() -> T) -> &T {
+        self.0.get_or_init(build)
+    }
+}
+
+impl<T> fmt::Debug for BuiltOnce<T> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(if self.0.get().is_some() {
+            "BuiltOnce(built)"
+        } else {
+            "BuiltOnce(not built)"
+        })
+    }
+}
+
+/// Values built from the `Arc<K>`s they describe, each kept while its `Arc`
+/// lives: for fields that are replaced rather than changed in place
+/// (`Arc::make_mut` on a shared value, or with this cache's weak reference
+/// alive, moves the value to a new allocation, so a changed value is never
+/// mistaken for the one a value was built from).
+pub struct ArcKeyedCache<K, V> {
+    entries: Mutex<Vec<(Weak<K>, V)>>,
+}
+
+impl<K, V: Clone> ArcKeyedCache<K, V> {
+    pub fn get_or_build(&self, key: &Arc<K>, build: impl FnOnce(&K) -> V) -> V {
+        match self.get_or_try_build(key, |k| Ok::<V, std::convert::Infallible>(build(k))) {
+            Ok(value) => value,
+            Err(never) => match never {},
+        }
+    }
+
+    pub fn get_or_try_build<E>(
+        &self,
+        key: &Arc<K>,
+        build: impl FnOnce(&K) -> Result<V, E>,
+    ) -> Result<V, E> {
+        // A panic while building leaves no entry behind; the lock itself is fine.
+        let mut entries = self.entries.lock().unwrap_or_else(PoisonError::into_inner);
+        entries.retain(|(built_from, _)| built_from.strong_count() > 0);
+        // A weak reference keeps its allocation, so no other value gets its address.
+        if let Some((_, value)) = entries
+            .iter()
+            .find(|(built_from, _)| std::ptr::eq(built_from.as_ptr(), Arc::as_ptr(key)))
+        {
+            return Ok(value.clone());
+        }
+        let value = build(key)?;
+        entries.push((Arc::downgrade(key), value.clone()));
+        Ok(value)
+    }
+}
+
+impl<K, V> ArcKeyedCache<K, V> {
+    pub const fn new() -> ArcKeyedCache<K, V> {
+        ArcKeyedCache {
+            entries: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// Forgets the values whose `Arc`s are gone.
+    pub fn release_orphans(&self) {
+        let mut entries = self.entries.lock().unwrap_or_else(PoisonError::into_inner);
+        entries.retain(|(built_from, _)| built_from.strong_count() > 0);
+    }
+}
+
+impl<K, V> Default for ArcKeyedCache<K, V> {
+    fn default() -> Self {
+        ArcKeyedCache::new()
+    }
+}
+
+impl<K, V: Clone> Clone for ArcKeyedCache<K, V> {
+    fn clone(&self) -> Self {
+        let entries = self.entries.lock().unwrap_or_else(PoisonError::into_inner);
+        ArcKeyedCache {
+            entries: Mutex::new(entries.clone()),
+        }
+    }
+}
+
+impl<K, V> fmt::Debug for ArcKeyedCache<K, V> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let entries = self.entries.lock().unwrap_or_else(PoisonError::into_inner);
+        write!(f, "ArcKeyedCache({} built)", entries.len())
+    }
+}

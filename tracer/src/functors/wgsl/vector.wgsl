@@ -1,0 +1,57 @@
+// Module `tracer_vector`: float tests on bits and the vector operations of
+// glam (tracer/src/functors/*/mod.rs use glam), written out in glam's order of
+// operations so that the GPU rounds where the CPU does. WGSL implementations
+// may assume that no float is NaN or infinite, so NaN and infinity tests look
+// at the bits instead of comparing.
+
+fn tracer_infinity() -> f32 {
+    return bitcast<f32>(0x7f800000u);
+}
+
+fn tracer_is_nan(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7fffffffu) > 0x7f800000u;
+}
+
+fn tracer_is_finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
+}
+
+// `x > 0.0` as the CPU evaluates it: false for NaN and zeros, true for
+// subnormals and +inf (the bits 1 ..= 0x7f800000).
+fn tracer_is_positive(x: f32) -> bool {
+    return bitcast<u32>(x) - 1u < 0x7f800000u;
+}
+
+// glam's `dot`: `(x * x') + (y * y') + (z * z')`, left to right.
+fn tracer_dot(a: vec3<f32>, b: vec3<f32>) -> f32 {
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+// glam's `cross`.
+fn tracer_cross(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y);
+}
+
+// glam's `length`: the square root of `dot(v, v)`.
+fn tracer_length(v: vec3<f32>) -> f32 {
+    return sqrt(tracer_dot(v, v));
+}
+
+// glam's `normalize`: `v * (1 / length)` (not WGSL's `normalize`, which may
+// use a less precise inverse square root).
+fn tracer_normalize(v: vec3<f32>) -> vec3<f32> {
+    return v * (1.0 / tracer_length(v));
+}
+
+// glam's `normalize_or_zero`: zero where `1 / length` is not finite and positive.
+fn tracer_normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
+    let reciprocal = 1.0 / tracer_length(v);
+    if (tracer_is_finite(reciprocal) && tracer_is_positive(reciprocal)) {
+        return v * reciprocal;
+    }
+    return vec3<f32>(0.0);
+}
+
+fn tracer_is_zero_vector(v: vec3<f32>) -> bool {
+    return v.x == 0.0 && v.y == 0.0 && v.z == 0.0;
+}
