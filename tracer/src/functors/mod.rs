@@ -23,6 +23,8 @@ pub mod case_triangles;
 pub mod cube_case;
 pub mod cube_triangle;
 pub mod intersect;
+#[cfg(feature = "embree")]
+pub mod intersect_embree;
 pub mod isosurface;
 pub mod normal_color;
 pub mod occ_ray_gen;
@@ -32,12 +34,14 @@ pub mod shader;
 pub mod shadow_ray;
 pub mod surface;
 pub mod visible_lights;
+pub mod wgsl;
 
 use crate::bvh::{HitRecord, Ray};
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, FunctorError, RecordId, RecordRegistry, RecordType,
 };
 use glam::Vec3;
+use std::mem::MaybeUninit;
 use std::sync::Arc;
 
 /// `Hit.prim` of a miss.
@@ -191,7 +195,7 @@ impl<'a> RayWriter<'a> {
         Ok(writer)
     }
 
-    #[inline]
+    #[inline(always)]
     pub fn push(&mut self, ray: RayRecord) {
         self.origin.push(ray.origin);
         self.dir.push(ray.dir);
@@ -200,6 +204,55 @@ impl<'a> RayWriter<'a> {
         self.weight.push(ray.weight);
         self.depth.push(ray.depth);
     }
+
+    /// Appends `len` records, record `i` being `ray(i)`, in one pass that writes
+    /// every column straight into its spare capacity (no per-element capacity
+    /// checks).
+    #[inline(always)]
+    pub fn extend_with(&mut self, len: usize, mut ray: impl FnMut(usize) -> RayRecord) {
+        let origin = spare(self.origin, len);
+        let dir = spare(self.dir, len);
+        let tmax = spare(self.tmax, len);
+        let sample = spare(self.sample, len);
+        let weight = spare(self.weight, len);
+        let depth = spare(self.depth, len);
+        for i in 0..len {
+            let r = ray(i);
+            origin[i].write(r.origin);
+            dir[i].write(r.dir);
+            tmax[i].write(r.tmax);
+            sample[i].write(r.sample);
+            weight[i].write(r.weight);
+            depth[i].write(r.depth);
+        }
+        // SAFETY: the loop wrote the first `len` spare elements of every column.
+        unsafe {
+            commit(self.origin, len);
+            commit(self.dir, len);
+            commit(self.tmax, len);
+            commit(self.sample, len);
+            commit(self.weight, len);
+            commit(self.depth, len);
+        }
+    }
+}
+
+/// The first `len` elements of `column`'s spare capacity (reserved here), to be
+/// written and then appended with [`commit`].
+#[inline(always)]
+fn spare<T>(column: &mut Vec<T>, len: usize) -> &mut [MaybeUninit<T>] {
+    column.reserve(len);
+    &mut column.spare_capacity_mut()[..len]
+}
+
+/// Appends the first `len` elements of `column`'s spare capacity.
+///
+/// # Safety
+/// They must have been written (as through [`spare`]).
+#[inline(always)]
+unsafe fn commit<T>(column: &mut Vec<T>, len: usize) {
+    // SAFETY: `spare` reserved them and the caller wrote them.
+    unsafe { column.set_len(column.len() + len) }
 }
 
 /// The columns of a chunk of `Hit` records.
@@ -371,7 +424,8 @@ impl<'a> SurfaceWriter<'a> {
         Ok(writer)
     }
 
-    #[inline]
+    /// Appends one record (the tests build inputs with it).
+    #[cfg(test)]
     pub fn push(&mut self, surface: SurfaceRecord) {
         self.position.push(surface.position);
         self.normal.push(surface.normal);
@@ -383,6 +437,49 @@ impl<'a> SurfaceWriter<'a> {
         self.weight.push(surface.weight);
         self.depth.push(surface.depth);
         self.geometric.push(surface.geometric);
+    }
+
+    /// Appends `len` records, record `i` being `surface(i)`, in one pass that
+    /// writes every column straight into its spare capacity (no per-element
+    /// capacity checks).
+    #[inline(always)]
+    pub fn extend_with(&mut self, len: usize, mut surface: impl FnMut(usize) -> SurfaceRecord) {
+        let position = spare(self.position, len);
+        let normal = spare(self.normal, len);
+        let view = spare(self.view, len);
+        let scalar = spare(self.scalar, len);
+        let material = spare(self.material, len);
+        let hit = spare(self.hit, len);
+        let sample = spare(self.sample, len);
+        let weight = spare(self.weight, len);
+        let depth = spare(self.depth, len);
+        let geometric = spare(self.geometric, len);
+        for i in 0..len {
+            let s = surface(i);
+            position[i].write(s.position);
+            normal[i].write(s.normal);
+            view[i].write(s.view);
+            scalar[i].write(s.scalar);
+            material[i].write(s.material);
+            hit[i].write(s.hit);
+            sample[i].write(s.sample);
+            weight[i].write(s.weight);
+            depth[i].write(s.depth);
+            geometric[i].write(s.geometric);
+        }
+        // SAFETY: the loop wrote the first `len` spare elements of every column.
+        unsafe {
+            commit(self.position, len);
+            commit(self.normal, len);
+            commit(self.view, len);
+            commit(self.scalar, len);
+            commit(self.material, len);
+            commit(self.hit, len);
+            commit(self.sample, len);
+            commit(self.weight, len);
+            commit(self.depth, len);
+            commit(self.geometric, len);
+        }
     }
 }
 
@@ -628,5 +725,64 @@ pub(crate) mod test_support {
         let view = column.view();
         let surfaces = super::SurfaceColumns::new(&view);
         (0..surfaces.len()).map(|i| surfaces.get(i)).collect()
+    }
+
+    /// The element types a monomorphic signature's parameters have.
+    fn exact_types(params: &[dpp_runtime::ArrayParam]) -> Vec<ElemType> {
+        params
+            .iter()
+            .map(|p| match p.ty {
+                dpp_runtime::TypePattern::Exact(ty) => ty,
+                dpp_runtime::TypePattern::Var(..) => {
+                    unreachable!("tracer functors are monomorphic")
+                }
+            })
+            .collect()
+    }
+
+    /// Functor `name`'s WGSL twin for `resources`, as the GPU backend asks for
+    /// it (function `stage7_{name}`), validated by `check_twin` with the
+    /// library's uniforms; also checks that every `_fail(code)` the source
+    /// raises has a message and every message is raised.
+    pub fn checked_twin(
+        library: &FunctorLibrary,
+        name: &str,
+        resources: &(dyn std::any::Any + Send + Sync),
+    ) -> Result<dpp_runtime::wgsl::WgslTwin, String> {
+        let functor = library.get(name).ok_or(format!("no functor `{name}`"))?;
+        let signature = functor.signature();
+        let (inputs, outputs) = (
+            exact_types(&signature.inputs),
+            exact_types(&signature.outputs),
+        );
+        let function = format!("stage7_{name}");
+        let request = dpp_runtime::wgsl::WgslRequest {
+            function: &function,
+            inputs: &inputs,
+            outputs: &outputs,
+            records: &library.records,
+            resources,
+        };
+        let twin = functor.wgsl(&request).map_err(|e| e.0)?;
+        dpp_runtime::wgsl::check_twin(signature, &request, &twin, &library.uniforms)?;
+        let fail = format!("{function}_fail(");
+        let mut raised: Vec<usize> = twin
+            .source
+            .match_indices(&fail)
+            .map(|(at, _)| {
+                let code = &twin.source[at + fail.len()..];
+                let digits: String = code.chars().take_while(char::is_ascii_digit).collect();
+                digits.parse().expect("failure codes are literals")
+            })
+            .collect();
+        raised.sort_unstable();
+        raised.dedup();
+        let expected: Vec<usize> = (0..twin.failures.len()).collect();
+        if raised != expected {
+            return Err(format!(
+                "{name}: the source raises failures {raised:?} but has messages for {expected:?}"
+            ));
+        }
+        Ok(twin)
     }
 }

@@ -7,7 +7,9 @@
 //! (the shader's) ends with `antiAlias`, with `group: 1` when it takes one
 //! sample per pixel. NaN components become 0.
 
+use crate::functors::wgsl::{f32_literal, twin, vector_module, TwinParts};
 use crate::shading::linear_to_srgb;
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     Signature, TypePattern,
@@ -45,6 +47,20 @@ impl Functor for AntiAlias {
         &self.signature
     }
 
+    /// `twin.wgsl`: the mean, clamped and sRGB-encoded with the CPU's constants.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let parts = TwinParts {
+            constants: vec![
+                ("SRGB_LINEAR_LIMIT", f32_literal(0.003_130_8)),
+                ("SRGB_EXPONENT", f32_literal(1.0 / 2.4)),
+            ],
+            modules: vec![vector_module()],
+            buffers: Vec::new(),
+            failures: vec!["antiAlias: group must be at least 1".into()],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
+    }
+
     fn run_cpu(
         &self,
         ctx: &CallContext<'_>,
@@ -57,14 +73,49 @@ impl Functor for AntiAlias {
         }
         let colors = inputs[0].as_vec3();
         let scale = 1.0 / samples as f32;
-        outputs[0]
-            .as_vec3_mut()
-            .extend(colors.chunks_exact(samples).map(|group| {
-                let mean = group.iter().copied().sum::<Vec3>() * scale;
-                // `max` first: it maps NaN to 0.
-                linear_to_srgb(mean.max(Vec3::ZERO).min(Vec3::ONE))
-            }));
+        let out = outputs[0].as_vec3_mut();
+        let mut encode = Encoder::default();
+        if samples == 1 {
+            // The sum of one sample, as `Sum` folds it (from zero).
+            out.extend(
+                colors
+                    .iter()
+                    .map(|&c| encode.mean((Vec3::ZERO + c) * scale)),
+            );
+        } else {
+            out.extend(
+                colors
+                    .chunks_exact(samples)
+                    .map(|group| encode.mean(group.iter().copied().sum::<Vec3>() * scale)),
+            );
+        }
         Ok(())
+    }
+}
+
+/// Clamps and sRGB-encodes means, remembering the last one: neighbouring
+/// pixels often have exactly the same colour (the background), and the
+/// encoding's `powf`s are what costs here. The result is `linear_to_srgb`'s.
+#[derive(Default)]
+struct Encoder {
+    /// The bits of the last clamped mean and its encoding.
+    last: Option<([u32; 3], Vec3)>,
+}
+
+impl Encoder {
+    #[inline(always)]
+    fn mean(&mut self, mean: Vec3) -> Vec3 {
+        // `max` first: it maps NaN to 0.
+        let clamped = mean.max(Vec3::ZERO).min(Vec3::ONE);
+        let bits = clamped.to_array().map(f32::to_bits);
+        match self.last {
+            Some((last, encoded)) if last == bits => encoded,
+            _ => {
+                let encoded = linear_to_srgb(clamped);
+                self.last = Some((bits, encoded));
+                encoded
+            }
+        }
     }
 }
 

@@ -4,9 +4,11 @@
 //! `row-major pixel * spp + sample`, so scattering by it writes row-major output.
 //! Camera rays have weight 1 and depth 0.
 
-use crate::camera::{check_samples_per_pixel, sample_offset};
+use crate::camera::{check_samples_per_pixel, sample_offset, Camera};
+use crate::functors::wgsl::{request_resources, twin, vector_module, TwinParts};
 use crate::functors::{RayRecord, RayWriter};
 use crate::scene::TraceResources;
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
@@ -48,6 +50,23 @@ impl Functor for CameraRay {
         &self.signature
     }
 
+    /// `twin.wgsl`, reading the camera frame and Morton order built once per camera.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let camera =
+            request_resources::<TraceResources>(request, "cameraRay")?.camera_gpu_buffers();
+        let parts = TwinParts {
+            constants: Vec::new(),
+            modules: vec![vector_module()],
+            buffers: vec![camera.camera, camera.morton_pixels],
+            failures: vec![
+                "cameraRay: spp must be 1 or 4 (the sample patterns of the camera)".into(),
+                "cameraRay: a ray index is out of range for the camera's pixels x spp samples"
+                    .into(),
+            ],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
+    }
+
     fn run_cpu(
         &self,
         ctx: &CallContext<'_>,
@@ -65,31 +84,142 @@ impl Functor for CameraRay {
             })?;
         let setup = &ctx.resources::<TraceResources>()?.camera;
         let camera = &setup.camera;
+        let morton = setup.morton_pixels.as_slice();
         let indices = inputs[0].as_u32();
+        // Ray `index` is valid while `index / spp < morton.len()`. One check of
+        // the chunk's largest index up front keeps the loop free of errors.
+        let limit = morton.len() as u64 * u64::from(spp);
+        if indices
+            .iter()
+            .max()
+            .is_some_and(|&max| u64::from(max) >= limit)
+        {
+            let index = indices
+                .iter()
+                .find(|&&index| u64::from(index) >= limit)
+                .expect("the largest index is out of range");
+            return Err(FunctorError(format!(
+                "cameraRay: ray index {index} is out of range for {} pixels x {spp} samples",
+                morton.len()
+            )));
+        }
+        // spp is 1 or 4: a shift and a mask split an index into pixel and sample.
+        let shift = spp.trailing_zeros();
+        let mask = spp - 1;
+        let mut offsets = [(0.0, 0.0); 4];
+        for (sample, offset) in offsets.iter_mut().enumerate().take(spp as usize) {
+            *offset = sample_offset(spp, sample as u32);
+        }
+        let by_width = Divisor::new(camera.width);
+        let pixel_and_offset = |index: u32| {
+            let pixel = morton[(index >> shift) as usize];
+            let (sx, sy) = offsets[(index & mask) as usize];
+            let y = by_width.divide(pixel);
+            (pixel - y * camera.width, y, sx, sy)
+        };
+        let mut block = Directions::new();
         let mut rays = RayWriter::new(&mut outputs[0], indices.len())?;
-        for &index in indices {
-            let pixel = *setup
-                .morton_pixels
-                .get((index / spp) as usize)
-                .ok_or_else(|| {
-                    FunctorError(format!(
-                        "cameraRay: ray index {index} is out of range for {} pixels x {spp} samples",
-                        setup.morton_pixels.len()
-                    ))
-                })?;
-            let sample_in_pixel = index % spp;
-            let (sx, sy) = sample_offset(spp, sample_in_pixel);
-            rays.push(RayRecord {
+        rays.extend_with(indices.len(), |i| {
+            let lane = i % LANES;
+            if lane == 0 {
+                block.compute(
+                    camera,
+                    &indices[i..indices.len().min(i + LANES)],
+                    pixel_and_offset,
+                );
+            }
+            let index = indices[i];
+            let pixel = morton[(index >> shift) as usize];
+            RayRecord {
                 origin: camera.eye,
-                dir: camera.direction(pixel % camera.width, pixel / camera.width, sx, sy),
+                dir: block.get(lane),
                 tmax: f32::INFINITY,
                 // Below 2^30: the camera caps pixels at 2^28 and spp at 4.
-                sample: pixel * spp + sample_in_pixel,
+                sample: (pixel << shift) | (index & mask),
                 weight: Vec3::ONE,
                 depth: 0,
-            });
-        }
+            }
+        });
         Ok(())
+    }
+}
+
+/// Rays whose directions are computed together: the lanes of a block run the
+/// same arithmetic side by side, which the compiler turns into SIMD (the
+/// divisions and square roots are what costs).
+const LANES: usize = 64;
+
+/// The directions of up to [`LANES`] rays, one array per component.
+struct Directions {
+    x: [f32; LANES],
+    y: [f32; LANES],
+    z: [f32; LANES],
+}
+
+impl Directions {
+    fn new() -> Directions {
+        let zeros = [0.0; LANES];
+        Directions {
+            x: zeros,
+            y: zeros,
+            z: zeros,
+        }
+    }
+
+    /// The directions of rays `indices` (at most [`LANES`]), `pixel_and_offset`
+    /// giving each one's pixel column and row and offset in the pixel.
+    #[inline(always)]
+    fn compute(
+        &mut self,
+        camera: &Camera,
+        indices: &[u32],
+        pixel_and_offset: impl Fn(u32) -> (u32, u32, f32, f32),
+    ) {
+        // Lanes past the end stay at pixel (0, 0): computed, never read.
+        let (mut px, mut py) = ([0u32; LANES], [0u32; LANES]);
+        let (mut sx, mut sy) = ([0f32; LANES], [0f32; LANES]);
+        for (lane, &index) in indices.iter().enumerate().take(LANES) {
+            (px[lane], py[lane], sx[lane], sy[lane]) = pixel_and_offset(index);
+        }
+        for lane in 0..LANES {
+            let dir = camera.direction(px[lane], py[lane], sx[lane], sy[lane]);
+            (self.x[lane], self.y[lane], self.z[lane]) = (dir.x, dir.y, dir.z);
+        }
+    }
+
+    #[inline(always)]
+    fn get(&self, lane: usize) -> Vec3 {
+        Vec3::new(self.x[lane], self.y[lane], self.z[lane])
+    }
+}
+
+/// Division of `u32`s by a fixed divisor as a multiplication (Lemire, Kaser and
+/// Kurz, "Faster remainder by direct computation", 2019): with
+/// `m = ceil(2^64 / d)`, `n / d = (m * n) >> 64` for every `u32` `n` and `d > 1`.
+#[derive(Clone, Copy)]
+struct Divisor {
+    /// `ceil(2^64 / d)`; 0 for `d = 1` (whose `m`, 2^64, does not fit).
+    multiplier: u64,
+}
+
+impl Divisor {
+    fn new(divisor: u32) -> Divisor {
+        assert!(divisor > 0, "division by zero");
+        let multiplier = if divisor == 1 {
+            0
+        } else {
+            u64::MAX / u64::from(divisor) + 1
+        };
+        Divisor { multiplier }
+    }
+
+    #[inline(always)]
+    fn divide(self, n: u32) -> u32 {
+        if self.multiplier == 0 {
+            n
+        } else {
+            ((u128::from(self.multiplier) * u128::from(n)) >> 64) as u32
+        }
     }
 }
 
@@ -142,6 +272,39 @@ mod tests {
                 rays.field(1).as_vec3()[i],
                 camera.direction(pixel % 4, pixel / 4, sx, sy)
             );
+        }
+    }
+
+    #[test]
+    fn divisor_divides_exactly() {
+        let mut n = 0x2545_f491u32;
+        for d in [
+            1,
+            2,
+            3,
+            4,
+            7,
+            640,
+            1000,
+            1920,
+            3840,
+            65_535,
+            1 << 28,
+            u32::MAX,
+        ] {
+            let divisor = super::Divisor::new(d);
+            for edge in [0, 1, d - 1, d, d.wrapping_add(1), u32::MAX - 1, u32::MAX] {
+                assert_eq!(divisor.divide(edge), edge / d, "{edge} / {d}");
+            }
+            for _ in 0..10_000 {
+                // xorshift32
+                n ^= n << 13;
+                n ^= n >> 17;
+                n ^= n << 5;
+                assert_eq!(divisor.divide(n), n / d, "{n} / {d}");
+                let small = n >> 4;
+                assert_eq!(divisor.divide(small), small / d, "{small} / {d}");
+            }
         }
     }
 

@@ -18,13 +18,18 @@
 //!   the rest) and by `surf.weight`; a miss gives the background times
 //!   `surf.weight`.
 
+use crate::functors::wgsl::{
+    colormap_module, request_resources, surface_module, twin, vector_module, TwinParts,
+};
 use crate::functors::{named_f32, scene_diagonal, SurfaceColumns};
 use crate::scene::TraceResources;
-use crate::shading::MAX_LIGHTS;
+use crate::shading::{PointLight, MAX_LIGHTS};
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
 };
+use glam::Vec3;
 
 pub struct Shader {
     signature: Signature,
@@ -79,6 +84,24 @@ impl Functor for Shader {
         &self.signature
     }
 
+    /// `twin.wgsl`, reading materials, lights and colour map, built once per shading set-up.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let shading = request_resources::<TraceResources>(request, "shader")?.shading_gpu_buffers();
+        let parts = TwinParts {
+            constants: vec![("MAX_LIGHTS", format!("{MAX_LIGHTS}u"))],
+            modules: vec![vector_module(), surface_module(), colormap_module(&shading)],
+            buffers: vec![shading.constants, shading.materials, shading.lights],
+            failures: vec![
+                "shader: ambient must be a finite number".into(),
+                "shader: falloff must be a finite number".into(),
+                "shader: the scene.diagonal uniform is not a positive number (no scene loaded?)"
+                    .into(),
+                "shader: a surface has a material the scene does not have".into(),
+            ],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
+    }
+
     fn run_cpu(
         &self,
         ctx: &CallContext<'_>,
@@ -98,55 +121,187 @@ impl Functor for Shader {
         let background = shading.background();
 
         let surfaces = SurfaceColumns::new(&inputs[0]);
-        let occlusion = inputs[1].as_f32();
-        let visible = inputs[2].as_u32();
+        let len = surfaces.len();
+        // The same length for every column lets the loop drop its bounds checks.
+        let (positions, normals, views) = (
+            &surfaces.position[..len],
+            &surfaces.normal[..len],
+            &surfaces.view[..len],
+        );
+        let (scalars, material_ids, hits, weights) = (
+            &surfaces.scalar[..len],
+            &surfaces.material[..len],
+            &surfaces.hit[..len],
+            &surfaces.weight[..len],
+        );
+        let occlusion = &inputs[1].as_f32()[..len];
+        let visible = &inputs[2].as_u32()[..len];
+        // Every material a hit names must exist: checked up front, so that the
+        // loop below cannot fail.
+        if let Some(index) =
+            (0..len).find(|&i| hits[i] && material_ids[i] as usize >= materials.len())
+        {
+            return Err(FunctorError(format!(
+                "shader: surface has material {}, but the scene has {} materials",
+                material_ids[index],
+                materials.len()
+            )));
+        }
         let colors = outputs[0].as_vec3_mut();
-        colors.reserve(surfaces.len());
-        for index in 0..surfaces.len() {
-            let surface = surfaces.get(index);
-            if !surface.hit {
-                colors.push(background * surface.weight);
-                continue;
-            }
-            let material = materials.get(surface.material as usize).ok_or_else(|| {
-                FunctorError(format!(
-                    "shader: surface has material {}, but the scene has {} materials",
-                    surface.material,
-                    materials.len()
-                ))
-            })?;
-            let base = colormap.linear_at((surface.scalar - low) * inverse_range) * material.kd;
-            let open = 1.0 - occlusion[index].clamp(0.0, 1.0);
-            let mut local = ambient * open * base;
-            let mask = visible[index];
-            let normal = surface.normal;
-            let sees_viewer = normal.dot(surface.view) > 0.0;
-            for (light_index, light) in lights.iter().enumerate() {
-                if mask & (1 << light_index) == 0 {
-                    continue;
-                }
-                let to_light = light.position - surface.position;
-                let distance = to_light.length();
-                let direction = to_light / distance;
-                let diffuse = normal.dot(direction);
-                // Also false for NaN (a light exactly at the point).
-                let in_front = diffuse > 0.0;
-                if !in_front {
-                    continue;
-                }
-                let scaled = distance * inverse_diagonal;
-                let attenuation = light.intensity / (1.0 + falloff * scaled * scaled);
-                let specular = if sees_viewer {
-                    let half = (direction + surface.view).normalize_or_zero();
-                    normal.dot(half).max(0.0).powf(material.ns)
+        colors.reserve(len);
+        let mut block = Block::new();
+        for start in (0..len).step_by(BLOCK) {
+            let end = len.min(start + BLOCK);
+            let mut out = [Vec3::ZERO; BLOCK];
+            // Misses are the background; hits go to lanes, in order.
+            let mut lanes = 0;
+            for index in start..end {
+                if hits[index] {
+                    block.index[lanes] = index;
+                    lanes += 1;
                 } else {
-                    0.0
-                };
-                local += attenuation * light.color * (base * diffuse + material.ks * specular);
+                    out[index - start] = background * weights[index];
+                }
             }
-            colors.push(local * (1.0 - material.reflectivity) * surface.weight);
+            for lane in 0..lanes {
+                let index = block.index[lane];
+                let material = &materials[material_ids[index] as usize];
+                let base = colormap.linear_at((scalars[index] - low) * inverse_range) * material.kd;
+                let open = 1.0 - occlusion[index].clamp(0.0, 1.0);
+                block.local[lane] = ambient * open * base;
+                block.base[lane] = base;
+                let (normal, view) = (normals[index], views[index]);
+                block.sees_viewer[lane] = normal.dot(view) > 0.0;
+                block.position.set(lane, positions[index]);
+                block.normal.set(lane, normal);
+                block.view.set(lane, view);
+            }
+            for (light_index, light) in lights.iter().enumerate() {
+                block.light(light, lanes, inverse_diagonal, falloff);
+                let bit = 1 << light_index;
+                for lane in 0..lanes {
+                    let index = block.index[lane];
+                    if visible[index] & bit == 0 {
+                        continue;
+                    }
+                    let diffuse = block.diffuse[lane];
+                    // Also false for NaN (a light exactly at the point).
+                    let in_front = diffuse > 0.0;
+                    if !in_front {
+                        continue;
+                    }
+                    let material = &materials[material_ids[index] as usize];
+                    let specular = if block.sees_viewer[lane] {
+                        block.normal_dot_half[lane].max(0.0).powf(material.ns)
+                    } else {
+                        0.0
+                    };
+                    block.local[lane] += block.attenuation[lane]
+                        * light.color
+                        * (block.base[lane] * diffuse + material.ks * specular);
+                }
+            }
+            for lane in 0..lanes {
+                let index = block.index[lane];
+                let material = &materials[material_ids[index] as usize];
+                out[index - start] =
+                    block.local[lane] * (1.0 - material.reflectivity) * weights[index];
+            }
+            colors.extend_from_slice(&out[..end - start]);
         }
         Ok(())
+    }
+}
+
+/// Surfaces shaded together: the hits of up to `BLOCK` consecutive surfaces
+/// become lanes, and each light's geometry (the square roots and divisions)
+/// is computed for all lanes in loops the compiler turns into SIMD. The
+/// arithmetic is the per-surface formula's, operation for operation.
+const BLOCK: usize = 64;
+
+/// `BLOCK` vectors, one array per component.
+struct Lanes {
+    x: [f32; BLOCK],
+    y: [f32; BLOCK],
+    z: [f32; BLOCK],
+}
+
+impl Lanes {
+    fn new() -> Lanes {
+        Lanes {
+            x: [0.0; BLOCK],
+            y: [0.0; BLOCK],
+            z: [0.0; BLOCK],
+        }
+    }
+
+    #[inline(always)]
+    fn set(&mut self, lane: usize, v: Vec3) {
+        (self.x[lane], self.y[lane], self.z[lane]) = (v.x, v.y, v.z);
+    }
+}
+
+/// The lanes of a block: the hits' surfaces, their shading so far, and one
+/// light's geometry at a time.
+struct Block {
+    /// The surface of each lane.
+    index: [usize; BLOCK],
+    position: Lanes,
+    normal: Lanes,
+    view: Lanes,
+    base: [Vec3; BLOCK],
+    sees_viewer: [bool; BLOCK],
+    /// The colour so far.
+    local: [Vec3; BLOCK],
+    /// `normal·direction`, the attenuation, and `normal·half` for the current light.
+    diffuse: [f32; BLOCK],
+    attenuation: [f32; BLOCK],
+    normal_dot_half: [f32; BLOCK],
+}
+
+impl Block {
+    fn new() -> Block {
+        Block {
+            index: [0; BLOCK],
+            position: Lanes::new(),
+            normal: Lanes::new(),
+            view: Lanes::new(),
+            base: [Vec3::ZERO; BLOCK],
+            sees_viewer: [false; BLOCK],
+            local: [Vec3::ZERO; BLOCK],
+            diffuse: [0.0; BLOCK],
+            attenuation: [0.0; BLOCK],
+            normal_dot_half: [0.0; BLOCK],
+        }
+    }
+
+    /// `diffuse`, `attenuation` and `normal_dot_half` of the first `lanes`
+    /// lanes for `light`, as `Vec3` arithmetic computes them: `to_light =
+    /// light - position`, `distance = to_light.length()`, `direction = to_light
+    /// / distance`, `half = (direction + view).normalize_or_zero()`.
+    #[inline(always)]
+    fn light(&mut self, light: &PointLight, lanes: usize, inverse_diagonal: f32, falloff: f32) {
+        let (p, n, v) = (&self.position, &self.normal, &self.view);
+        for lane in 0..lanes.min(BLOCK) {
+            let tx = light.position.x - p.x[lane];
+            let ty = light.position.y - p.y[lane];
+            let tz = light.position.z - p.z[lane];
+            let distance = (tx * tx + ty * ty + tz * tz).sqrt();
+            let (dx, dy, dz) = (tx / distance, ty / distance, tz / distance);
+            let (nx, ny, nz) = (n.x[lane], n.y[lane], n.z[lane]);
+            self.diffuse[lane] = nx * dx + ny * dy + nz * dz;
+            let scaled = distance * inverse_diagonal;
+            self.attenuation[lane] = light.intensity / (1.0 + falloff * scaled * scaled);
+            let (hx, hy, hz) = (dx + v.x[lane], dy + v.y[lane], dz + v.z[lane]);
+            let rcp = 1.0 / (hx * hx + hy * hy + hz * hz).sqrt();
+            let unit = rcp.is_finite() && rcp > 0.0;
+            let (hx, hy, hz) = if unit {
+                (hx * rcp, hy * rcp, hz * rcp)
+            } else {
+                (0.0, 0.0, 0.0)
+            };
+            self.normal_dot_half[lane] = nx * hx + ny * hy + nz * hz;
+        }
     }
 }
 
@@ -309,6 +464,136 @@ mod tests {
             rgb[2]
         );
         assert_eq!(rgb[3], Vec3::new(0.5, 0.25, 0.0));
+    }
+
+    /// The shading of one surface, written out per surface as the shader
+    /// computed it before it shaded blocks of lanes: the reference its block
+    /// arithmetic must match bit for bit.
+    fn reference(fixture: &Fixture, s: &SurfaceRecord, occlusion: f32, mask: u32) -> Vec3 {
+        let (ambient, falloff) = (0.2, 0.7);
+        let shading = &fixture.resources.shading;
+        let diagonal = fixture
+            .uniforms
+            .get("scene", "diagonal")
+            .and_then(|d| d.as_f32())
+            .unwrap();
+        let inverse_diagonal = 1.0 / diagonal;
+        let [low, high] = shading.scalar_range();
+        let inverse_range = 1.0 / (high - low);
+        if !s.hit {
+            return shading.background() * s.weight;
+        }
+        let material = &shading.materials()[s.material as usize];
+        let base = shading
+            .colormap()
+            .linear_at((s.scalar - low) * inverse_range)
+            * material.kd;
+        let open = 1.0 - occlusion.clamp(0.0, 1.0);
+        let mut local = ambient * open * base;
+        let sees_viewer = s.normal.dot(s.view) > 0.0;
+        for (light_index, light) in shading.lights().iter().enumerate() {
+            if mask & (1 << light_index) == 0 {
+                continue;
+            }
+            let to_light = light.position - s.position;
+            let distance = to_light.length();
+            let direction = to_light / distance;
+            let diffuse = s.normal.dot(direction);
+            // Also false for NaN (a light exactly at the point).
+            let in_front = diffuse > 0.0;
+            if !in_front {
+                continue;
+            }
+            let scaled = distance * inverse_diagonal;
+            let attenuation = light.intensity / (1.0 + falloff * scaled * scaled);
+            let specular = if sees_viewer {
+                let half = (direction + s.view).normalize_or_zero();
+                s.normal.dot(half).max(0.0).powf(material.ns)
+            } else {
+                0.0
+            };
+            local += attenuation * light.color * (base * diffuse + material.ks * specular);
+        }
+        local * (1.0 - material.reflectivity) * s.weight
+    }
+
+    #[test]
+    fn blocks_of_lanes_shade_bit_for_bit_as_one_surface_at_a_time() {
+        let lights = [
+            Vec3::new(0.0, 0.0, 5.0),
+            Vec3::new(-3.0, 2.0, 1.0),
+            // Exactly at a surface below: distance 0, a NaN direction.
+            Vec3::new(0.5, 0.5, 0.0),
+            // Far beyond the scene: strongly attenuated.
+            Vec3::new(40.0, 30.0, 20.0),
+        ];
+        let mut fixture = fixture(lights[0]);
+        fixture.set_shading(|shading| {
+            let mut all: Vec<PointLight> =
+                lights.iter().map(|&p| PointLight::new(p, 0.7)).collect();
+            all[1].color = Vec3::new(1.0, 0.5, 0.25);
+            shading.set_lights(all).unwrap();
+            shading.set_colormap("viridis").unwrap();
+            shading.set_scalar_range(-1.0, 2.0).unwrap();
+            shading
+                .set_material(
+                    "default",
+                    &MaterialSpec {
+                        ns: Some(7.5),
+                        reflectivity: Some(0.3),
+                        ..Default::default()
+                    },
+                )
+                .unwrap();
+        });
+        let mut state = 0x9e37_79b9u32;
+        let mut random = move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state as f32 / u32::MAX as f32
+        };
+        let unit = |random: &mut dyn FnMut() -> f32| {
+            Vec3::new(random() - 0.5, random() - 0.5, random() - 0.5).normalize_or_zero()
+        };
+        let (mut surfaces, mut occlusion, mut visible) = (Vec::new(), Vec::new(), Vec::new());
+        // Several blocks and a partial one.
+        for i in 0..300u32 {
+            let mut s = lit_point();
+            s.position = 3.0 * unit(&mut random);
+            s.normal = unit(&mut random);
+            s.view = unit(&mut random);
+            s.scalar = 4.0 * random() - 1.5;
+            s.weight = Vec3::new(random(), random(), 1.0);
+            s.hit = i % 5 != 3;
+            s.sample = i;
+            match i % 7 {
+                // A half vector of length 0: the view opposite the light.
+                0 => s.view = -(lights[1] - s.position).normalize(),
+                1 => s.position = lights[2],
+                2 => s.normal = s.view,
+                _ => {}
+            }
+            surfaces.push(s);
+            occlusion.push(match i % 11 {
+                0 => f32::NAN,
+                1 => -0.5,
+                2 => 1.5,
+                _ => random(),
+            });
+            visible.push(if i % 3 == 0 { u32::MAX } else { i % 16 });
+        }
+        let named = [HostValue::Float(0.2), HostValue::Float(0.7)];
+        let rgb = shade(&fixture, &surfaces, &occlusion, &visible, &named);
+        for (i, s) in surfaces.iter().enumerate() {
+            let expected = reference(&fixture, s, occlusion[i], visible[i]);
+            assert_eq!(
+                rgb[i].to_array().map(f32::to_bits),
+                expected.to_array().map(f32::to_bits),
+                "surface {i}: {} != {expected}",
+                rgb[i]
+            );
+        }
     }
 
     #[test]

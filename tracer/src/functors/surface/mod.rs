@@ -20,8 +20,12 @@
 //! A miss gives `hit = false` and zeros except `sample`, `weight` and `depth`;
 //! a dead ray (`tmax <= 0`) gives a miss with zero weight, so it shades to black.
 
+use crate::functors::wgsl::{
+    f32_literal, mesh_module, request_resources, twin, vector_module, TwinParts,
+};
 use crate::functors::{HitColumns, RayColumns, SurfaceRecord, SurfaceWriter, MISS_PRIM};
 use crate::scene::TraceResources;
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     RecordId, Signature, TypePattern,
@@ -68,6 +72,24 @@ impl Functor for SurfaceFunctor {
         &self.signature
     }
 
+    /// `twin.wgsl`, reading the scene's triangles and vertices, built once per scene.
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        let scene = &request_resources::<TraceResources>(request, "surface")?.scene;
+        // As `facing_the_viewer` computes it.
+        let min_view_sine = (1.0 - MIN_VIEW_COSINE * MIN_VIEW_COSINE).sqrt();
+        let parts = TwinParts {
+            constants: vec![
+                ("MISS_PRIM", format!("{MISS_PRIM}u")),
+                ("MIN_VIEW_COSINE", f32_literal(MIN_VIEW_COSINE)),
+                ("MIN_VIEW_SINE", f32_literal(min_view_sine)),
+            ],
+            modules: vec![vector_module(), mesh_module(scene.gpu_buffers())],
+            buffers: Vec::new(),
+            failures: vec!["surface: a hit names a triangle the scene does not have".into()],
+        };
+        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
+    }
+
     fn run_cpu(
         &self,
         ctx: &CallContext<'_>,
@@ -78,36 +100,51 @@ impl Functor for SurfaceFunctor {
         let mesh = &scene.mesh;
         let rays = RayColumns::new(&inputs[0]);
         let hits = HitColumns::new(&inputs[1]);
+        let len = rays.len();
+        // The same length for every column lets the loop drop its bounds checks.
+        let (dirs, tmaxs, samples) = (&rays.dir[..len], &rays.tmax[..len], &rays.sample[..len]);
+        let (weights, depths) = (&rays.weight[..len], &rays.depth[..len]);
+        let (prims, us, vs) = (&hits.prim[..len], &hits.u[..len], &hits.v[..len]);
+        let triangles = mesh.triangles.as_slice();
+        let positions = mesh.positions.as_slice();
         let normals = mesh.normals.as_deref();
         let scalars = mesh.scalars.as_deref();
-        let mut out = SurfaceWriter::new(&mut outputs[0], rays.len())?;
-        for index in 0..rays.len() {
-            let (sample, depth) = (rays.sample[index], rays.depth[index]);
-            let alive = rays.tmax[index] > 0.0;
+        let triangle_materials = scene.materials.triangle_materials.as_slice();
+        // Every triangle a live ray hits must exist: checked up front, so that the
+        // loop below cannot fail.
+        let names_no_triangle = |index: usize| {
+            let prim = prims[index];
+            tmaxs[index] > 0.0 && prim != MISS_PRIM && prim as usize >= triangles.len()
+        };
+        if let Some(index) = (0..len).find(|&index| names_no_triangle(index)) {
+            return Err(FunctorError(format!(
+                "surface: hit names triangle {}, but the scene has {} triangles",
+                prims[index],
+                triangles.len()
+            )));
+        }
+        let mut out = SurfaceWriter::new(&mut outputs[0], len)?;
+        out.extend_with(len, |index| {
+            let (sample, depth) = (samples[index], depths[index]);
+            let alive = tmaxs[index] > 0.0;
             if !alive {
-                out.push(SurfaceRecord::miss(sample, Vec3::ZERO, depth));
-                continue;
+                return SurfaceRecord::miss(sample, Vec3::ZERO, depth);
             }
-            let prim = hits.prim[index];
+            let prim = prims[index];
             if prim == MISS_PRIM {
-                out.push(SurfaceRecord::miss(sample, rays.weight[index], depth));
-                continue;
+                return SurfaceRecord::miss(sample, weights[index], depth);
             }
-            let Some(&[a, b, c]) = mesh.triangles.get(prim as usize) else {
-                return Err(FunctorError(format!(
-                    "surface: hit names triangle {prim}, but the scene has {} triangles",
-                    mesh.triangles.len()
-                )));
-            };
-            let [a, b, c] = [a as usize, b as usize, c as usize];
-            let (u, v) = (hits.u[index], hits.v[index]);
+            let [a, b, c] = triangles[prim as usize].map(|vertex| vertex as usize);
+            let (u, v) = (us[index], vs[index]);
             let w = 1.0 - u - v;
-            let position = w * mesh.positions[a] + u * mesh.positions[b] + v * mesh.positions[c];
-            let dir = rays.dir[index];
+            let [p0, p1, p2] = [positions[a], positions[b], positions[c]];
+            let position = w * p0 + u * p1 + v * p2;
+            let dir = dirs[index];
             let view = -dir.normalize_or_zero();
             // The geometric normal on the ray's side (or the view vector for a
-            // degenerate triangle, which a ray can hardly hit).
-            let face = mesh.face_normal(prim as usize).normalize_or_zero();
+            // degenerate triangle, which a ray can hardly hit); as
+            // `TriangleMesh::face_normal` computes it.
+            let face = (p1 - p0).cross(p2 - p0).normalize_or_zero();
             let facing = if face == Vec3::ZERO {
                 view
             } else if face.dot(dir) > 0.0 {
@@ -127,19 +164,20 @@ impl Functor for SurfaceFunctor {
             };
             let normal = facing_the_viewer(normal, view, facing);
             let scalar = scalars.map_or(position.y, |s| w * s[a] + u * s[b] + v * s[c]);
-            out.push(SurfaceRecord {
+            SurfaceRecord {
                 position,
                 normal,
                 view,
                 scalar,
-                material: scene.triangle_material(prim),
+                // As `TraceScene::triangle_material`.
+                material: triangle_materials.get(prim as usize).copied().unwrap_or(0),
                 hit: true,
                 sample,
-                weight: rays.weight[index],
+                weight: weights[index],
                 depth,
                 geometric: facing,
-            });
-        }
+            }
+        });
         Ok(())
     }
 }
