@@ -53,7 +53,7 @@ pub enum KernelError {
 }
 
 /// The functor that performs `op`, as pipelines spell it.
-fn monoid_name(op: MonoidOp) -> &'static str {
+pub(crate) fn monoid_name(op: MonoidOp) -> &'static str {
     match op {
         MonoidOp::Add => "add",
         MonoidOp::Mul => "mul",

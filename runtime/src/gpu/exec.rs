@@ -512,14 +512,7 @@ impl GpuBackend<'_> {
             allocate_array(self.gpu, ElemType::Bool, blocks, records).map_err(gpu_error)?;
         let identity = monoid::identity(op, values.ty).map_err(error)?;
         {
-            let mut builder = self.builder();
-            let combine =
-                monoid::combine_function(op, values.ty, &mut builder.functions).map_err(error)?;
-            let load = builder.array_loader(values);
-            let flag = match flags {
-                Some(f) => format!("{}(j)", builder.array_loader(f)),
-                None => "false".into(),
-            };
+            let (mut builder, combine, load, flag) = self.scan_builder(op, values, flags)?;
             let count = builder.param_u32(n as u32);
             let store_total = builder.array_store(&totals, "i", "running");
             let store_start = builder.array_store(&starts, "i", "started");
@@ -541,14 +534,7 @@ impl GpuBackend<'_> {
             None
         };
         // Pass 3: each block rescanned from its carry, as the CPU's scan_chunk.
-        let mut builder = self.builder();
-        let combine =
-            monoid::combine_function(op, values.ty, &mut builder.functions).map_err(error)?;
-        let load = builder.array_loader(values);
-        let flag = match flags {
-            Some(f) => format!("{}(j)", builder.array_loader(f)),
-            None => "false".into(),
-        };
+        let (mut builder, combine, load, flag) = self.scan_builder(op, values, flags)?;
         let carry = match &carries {
             Some(c) => format!(
                 "select({identity}, {}(max(i, 1u) - 1u), i > 0u)",
@@ -573,6 +559,25 @@ impl GpuBackend<'_> {
         );
         dispatches.push(self.dispatch_of(builder, blocks));
         Ok(out)
+    }
+
+    /// A scan kernel's builder with the monoid, the value loader and the
+    /// segment flag of element `j` (`false` unsegmented) it reads.
+    fn scan_builder(
+        &self,
+        op: MonoidOp,
+        values: &GpuArray,
+        flags: Option<&GpuArray>,
+    ) -> Result<(ShaderBuilder<'_>, String, String, String), RunError> {
+        let mut builder = self.builder();
+        let combine =
+            monoid::combine_function(op, values.ty, &mut builder.functions).map_err(error)?;
+        let load = builder.array_loader(values);
+        let flag = match flags {
+            Some(f) => format!("{}(j)", builder.array_loader(f)),
+            None => "false".into(),
+        };
+        Ok((builder, combine, load, flag))
     }
 
     /// The second pass of a plain scatter: the last writer of each slot writes.

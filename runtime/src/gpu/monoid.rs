@@ -3,21 +3,10 @@
 //! combining scatter performs per word (a compare-and-swap loop, which needs
 //! no forward progress between workgroups).
 
-use crate::cpu::kernels::monoid_supports;
+use crate::cpu::kernels::{monoid_name, monoid_supports};
 use crate::functor::MonoidOp;
 use crate::types::ElemType;
 use std::fmt::Write;
-
-fn op_name(op: MonoidOp) -> &'static str {
-    match op {
-        MonoidOp::Add => "add",
-        MonoidOp::Mul => "mul",
-        MonoidOp::Min => "min",
-        MonoidOp::Max => "max",
-        MonoidOp::Or => "or",
-        MonoidOp::And => "and",
-    }
-}
 
 fn type_name(ty: ElemType) -> &'static str {
     match ty {
@@ -58,7 +47,7 @@ pub fn identity(op: MonoidOp, ty: ElemType) -> Result<String, String> {
     if !monoid_supports(op, ty) {
         return Err(format!(
             "`{}` is not defined on {ty:?} elements",
-            op_name(op)
+            monoid_name(op)
         ));
     }
     let scalar = match (op, component(ty)) {
@@ -87,10 +76,10 @@ pub fn identity(op: MonoidOp, ty: ElemType) -> Result<String, String> {
 /// same statements as the monoid functors' twins.
 pub fn combine_function(op: MonoidOp, ty: ElemType, out: &mut String) -> Result<String, String> {
     identity(op, ty)?;
-    let name = format!("monoid_{}_{}", op_name(op), short(ty));
+    let name = format!("monoid_{}_{}", monoid_name(op), short(ty));
     if !out.contains(&format!("fn {name}(")) {
         let statements = crate::generic::monoid_statements(op, ty)
-            .ok_or_else(|| format!("`{}` is not defined on {ty:?} elements", op_name(op)))?;
+            .ok_or_else(|| format!("`{}` is not defined on {ty:?} elements", monoid_name(op)))?;
         let t = type_name(ty);
         let _ = writeln!(out, "fn {name}(a: {t}, b: {t}) -> {t} {{ {statements} }}");
     }

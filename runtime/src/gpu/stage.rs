@@ -385,43 +385,33 @@ impl Generator<'_, '_, '_> {
     fn keep(&mut self, var: VarId, slots: &Slots<GpuArray>) -> Result<GpuArray, RunError> {
         match self.lookup(slots, var)? {
             Value::Whole(array) => Ok(array),
-            Value::Local(name) => {
-                let array = allocate_array(
-                    self.backend.gpu,
-                    self.call.elem_type(var),
-                    self.call.len,
-                    self.call.records,
-                )
-                .map_err(Self::gpu_error)?;
-                let store = self.builder.array_store(&array, "i", &name);
-                self.builder.body.push_str("    ");
-                self.builder.body.push_str(&store);
-                Ok(array)
-            }
+            Value::Local(name) => self.store_in_new_array(var, &name),
         }
     }
 
     /// Stores what the stage materialises (besides a sink's result).
     fn materialise(&mut self, slots: &mut Slots<GpuArray>) -> Result<(), RunError> {
         for var in elementwise_materialised(self.call.stage) {
-            match self.lookup(slots, var)? {
-                Value::Whole(array) => slots.set_array(var, array),
-                Value::Local(name) => {
-                    let array = allocate_array(
-                        self.backend.gpu,
-                        self.call.elem_type(var),
-                        self.call.len,
-                        self.call.records,
-                    )
-                    .map_err(Self::gpu_error)?;
-                    let store = self.builder.array_store(&array, "i", &name);
-                    self.builder.body.push_str("    ");
-                    self.builder.body.push_str(&store);
-                    slots.set_array(var, array);
-                }
-            }
+            let array = self.keep(var, slots)?;
+            slots.set_array(var, array);
         }
         Ok(())
+    }
+
+    /// A new array of `var`'s type and the stage's length, which the kernel
+    /// fills with local `name` at every index.
+    fn store_in_new_array(&mut self, var: VarId, name: &str) -> Result<GpuArray, RunError> {
+        let array = allocate_array(
+            self.backend.gpu,
+            self.call.elem_type(var),
+            self.call.len,
+            self.call.records,
+        )
+        .map_err(Self::gpu_error)?;
+        let store = self.builder.array_store(&array, "i", name);
+        self.builder.body.push_str("    ");
+        self.builder.body.push_str(&store);
+        Ok(array)
     }
 
     fn functor_kind(&self, op: &Op) -> Result<FunctorKind, RunError> {
