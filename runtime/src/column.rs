@@ -23,6 +23,14 @@ pub enum Column {
     },
 }
 
+/// One scalar of an element, for comparing arrays element by element:
+/// integers and bools by value, floats as they are (vectors by component).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Scalar {
+    Int(i64),
+    Float(f32),
+}
+
 /// A borrowed slice of an array: what a functor's CPU implementation receives.
 #[derive(Clone, Debug)]
 pub enum ColumnView<'a> {
@@ -191,6 +199,22 @@ impl Column {
                 a.elem_type(),
                 b.elem_type()
             ),
+        }
+    }
+
+    /// Appends element `i`'s scalars to `out`, record fields in order.
+    pub fn scalars_of(&self, i: usize, out: &mut Vec<Scalar>) {
+        let floats =
+            |xs: &[f32], out: &mut Vec<Scalar>| out.extend(xs.iter().map(|x| Scalar::Float(*x)));
+        match self {
+            Column::Bool(v) => out.push(Scalar::Int(v[i].into())),
+            Column::U32(v) => out.push(Scalar::Int(v[i].into())),
+            Column::I32(v) => out.push(Scalar::Int(v[i].into())),
+            Column::F32(v) => out.push(Scalar::Float(v[i])),
+            Column::Vec2(v) => floats(&v[i].to_array(), out),
+            Column::Vec3(v) => floats(&v[i].to_array(), out),
+            Column::Vec4(v) => floats(&v[i].to_array(), out),
+            Column::Record { fields, .. } => fields.iter().for_each(|f| f.scalars_of(i, out)),
         }
     }
 

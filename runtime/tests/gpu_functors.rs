@@ -8,6 +8,7 @@
 mod common;
 
 use common::Data;
+use dpp_runtime::column::Scalar as Cell;
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
 use dpp_runtime::cpu::kernels::DEFAULT_CHUNK;
 use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
@@ -685,27 +686,6 @@ fn pipeline(case: &Case, ty: Ty) -> String {
     text
 }
 
-/// One scalar of an element: integers and bools by value, floats by bits.
-#[derive(Clone, Copy, Debug)]
-enum Cell {
-    Int(i64),
-    Float(f32),
-}
-
-fn cells(column: &Column, i: usize, out: &mut Vec<Cell>) {
-    let floats = |xs: &[f32], out: &mut Vec<Cell>| out.extend(xs.iter().map(|x| Cell::Float(*x)));
-    match column {
-        Column::Bool(v) => out.push(Cell::Int(v[i].into())),
-        Column::U32(v) => out.push(Cell::Int(v[i].into())),
-        Column::I32(v) => out.push(Cell::Int(v[i].into())),
-        Column::F32(v) => out.push(Cell::Float(v[i])),
-        Column::Vec2(v) => floats(&v[i].to_array(), out),
-        Column::Vec3(v) => floats(&v[i].to_array(), out),
-        Column::Vec4(v) => floats(&v[i].to_array(), out),
-        Column::Record { fields, .. } => fields.iter().for_each(|f| cells(f, i, out)),
-    }
-}
-
 fn host_cells(value: HostValue) -> Vec<Cell> {
     match value {
         HostValue::Bool(b) => vec![Cell::Int(b.into())],
@@ -797,7 +777,7 @@ impl Run<'_> {
                 .filter(|&j| j < column.len())
                 .map(|j| {
                     let mut c = Vec::new();
-                    cells(column, j, &mut c);
+                    column.scalars_of(j, &mut c);
                     cells_text(&c)
                 })
                 .collect();
@@ -836,7 +816,7 @@ fn compare(run: &Run<'_>, name: &str, cpu: &OutputValue, gpu: &OutputValue) -> O
                 (0..column.len())
                     .map(|i| {
                         let mut c = Vec::new();
-                        cells(column, i, &mut c);
+                        column.scalars_of(i, &mut c);
                         c
                     })
                     .collect()

@@ -16,6 +16,7 @@ use crate::functors::{RayRecord, RayWriter, SurfaceRecord, SurfaceWriter};
 use crate::scene::TraceScene;
 use crate::shading::{Material, MeshMaterials, PointLight};
 use crate::volume::Volume;
+use dpp_runtime::column::Scalar as Cell;
 use dpp_runtime::gpu::{gpu_for_tests, run_functor_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{
     CallContext, Column, ElemType, FunctorError, FunctorLibrary, HostValue, RecordRegistry,
@@ -1342,27 +1343,6 @@ fn cases(envs: &Envs) -> Vec<Case<'_>> {
 // ---------------------------------------------------------------------------
 // Running and comparing
 
-/// One scalar of an element: integers and bools by value, floats as they are.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Cell {
-    Int(i64),
-    Float(f32),
-}
-
-fn cells(column: &Column, i: usize, out: &mut Vec<Cell>) {
-    let floats = |xs: &[f32], out: &mut Vec<Cell>| out.extend(xs.iter().map(|x| Cell::Float(*x)));
-    match column {
-        Column::Bool(v) => out.push(Cell::Int(v[i].into())),
-        Column::U32(v) => out.push(Cell::Int(v[i].into())),
-        Column::I32(v) => out.push(Cell::Int(v[i].into())),
-        Column::F32(v) => out.push(Cell::Float(v[i])),
-        Column::Vec2(v) => floats(&v[i].to_array(), out),
-        Column::Vec3(v) => floats(&v[i].to_array(), out),
-        Column::Vec4(v) => floats(&v[i].to_array(), out),
-        Column::Record { fields, .. } => fields.iter().for_each(|f| cells(f, i, out)),
-    }
-}
-
 /// The names of the cells of an element of type `ty`, as [`cells`] lists them.
 fn cell_names(ty: ElemType, records: &RecordRegistry, prefix: &str, out: &mut Vec<String>) {
     let components = |n: usize, out: &mut Vec<String>| {
@@ -1489,7 +1469,7 @@ fn inputs_at(case: &Case<'_>, i: usize) -> String {
         cell_names(column.elem_type(), records, "", &mut names);
         for j in range.clone() {
             let mut values = Vec::new();
-            cells(column, j, &mut values);
+            column.scalars_of(j, &mut values);
             let fields: Vec<String> = names
                 .iter()
                 .zip(&values)
@@ -1527,8 +1507,8 @@ fn compare(
     for i in 0..cpu.len() {
         a.clear();
         b.clear();
-        cells(cpu, i, &mut a);
-        cells(gpu, i, &mut b);
+        cpu.scalars_of(i, &mut a);
+        gpu.scalars_of(i, &mut b);
         if let Some(p) = prim {
             if a[p] != b[p] {
                 other_triangle.push(i);
@@ -1571,8 +1551,8 @@ fn compare(
         for &i in other_triangle.iter().take(3) {
             a.clear();
             b.clear();
-            cells(cpu, i, &mut a);
-            cells(gpu, i, &mut b);
+            cpu.scalars_of(i, &mut a);
+            gpu.scalars_of(i, &mut b);
             let show = |c: &[Cell]| {
                 c.iter()
                     .map(|x| cell_text(*x))
