@@ -222,13 +222,7 @@ impl GpuBackend<'_> {
     }
 
     fn builder(&self) -> ShaderBuilder<'_> {
-        let params = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("dpp params (placeholder)"),
-            size: 4,
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
-        ShaderBuilder::new(&self.library.records, params, &self.status, &self.uniforms)
+        ShaderBuilder::new(&self.library.records, &self.status, &self.uniforms)
     }
 
     fn dispatch_of(&self, builder: ShaderBuilder<'_>, threads: usize) -> Dispatch {
@@ -291,11 +285,11 @@ impl GpuBackend<'_> {
                 .enumerate()
                 .map(|(n, binding)| wgpu::BindGroupEntry {
                     binding: n as u32,
-                    resource: if n == 0 {
-                        params_buffer.as_entire_binding()
-                    } else {
-                        binding.buffer.as_entire_binding()
-                    },
+                    resource: binding
+                        .buffer
+                        .as_ref()
+                        .unwrap_or(&params_buffer)
+                        .as_entire_binding(),
                 })
                 .collect();
             let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -435,7 +429,7 @@ impl GpuBackend<'_> {
         Ok(entry)
     }
 
-    /// Fails the run if a kernel recorded a failure; clears it otherwise.
+    /// Fails the run if a kernel recorded a failure (waits for the device).
     fn check_status(&self) -> Result<(), RunError> {
         let words = read_buffer_words(self.gpu, &self.status, 3).map_err(|e| error(e.0))?;
         if words[0] == 0 {

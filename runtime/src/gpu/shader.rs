@@ -22,7 +22,9 @@ pub enum Access {
 
 #[derive(Clone, Debug)]
 pub struct Binding {
-    pub buffer: wgpu::Buffer,
+    /// `None` for binding 0, the kernel's parameter words, which exist only
+    /// once the kernel is dispatched.
+    pub buffer: Option<wgpu::Buffer>,
     pub read_only: bool,
 }
 
@@ -42,11 +44,10 @@ pub struct ShaderBuilder<'r> {
 }
 
 impl<'r> ShaderBuilder<'r> {
-    /// A shader whose first three bindings are the parameter words (filled by
-    /// the caller once the kernel is done), the run's status and uniforms.
+    /// A shader whose first three bindings are the parameter words (bound at
+    /// dispatch), the run's status and uniforms.
     pub fn new(
         records: &'r RecordRegistry,
-        params: wgpu::Buffer,
         status: &wgpu::Buffer,
         uniforms: &wgpu::Buffer,
     ) -> ShaderBuilder<'r> {
@@ -66,15 +67,15 @@ impl<'r> ShaderBuilder<'r> {
             records,
             bindings: vec![
                 Binding {
-                    buffer: params,
+                    buffer: None,
                     read_only: true,
                 },
                 Binding {
-                    buffer: status.clone(),
+                    buffer: Some(status.clone()),
                     read_only: false,
                 },
                 Binding {
-                    buffer: uniforms.clone(),
+                    buffer: Some(uniforms.clone()),
                     read_only: true,
                 },
             ],
@@ -101,7 +102,7 @@ impl<'r> ShaderBuilder<'r> {
             "@group(0) @binding({binding}) var<storage, read> {name}: {wgsl_type};"
         );
         self.bindings.push(Binding {
-            buffer,
+            buffer: Some(buffer),
             read_only: true,
         });
     }
@@ -178,7 +179,7 @@ impl<'r> ShaderBuilder<'r> {
                 "@group(0) @binding({binding}) var<storage, {storage}> {name}_{s}: array<{element}>;"
             );
             self.bindings.push(Binding {
-                buffer: buffer.clone(),
+                buffer: Some(buffer.clone()),
                 read_only: access == Access::Read,
             });
         }

@@ -152,14 +152,13 @@ impl Generator<'_, '_, '_> {
                     self.locals.insert(op.outputs[0], value);
                 }
                 OpKind::Map => {
-                    let function = self.twin(position, op, slots)?;
+                    let (function, kind) = self.twin(position, op, slots)?;
                     let inputs: Vec<Value> = op
                         .inputs
                         .iter()
                         .map(|v| self.lookup(slots, *v))
                         .collect::<Result<_, _>>()?;
                     let mut arguments: Vec<String> = Vec::new();
-                    let kind = self.functor_kind(op)?;
                     if kind == FunctorKind::Map {
                         arguments.push("i".into());
                     }
@@ -189,7 +188,7 @@ impl Generator<'_, '_, '_> {
                     self.bind(op.outputs[0], format!("{loader}({name}_index)"));
                 }
                 OpKind::GroupGather { .. } => {
-                    let function = self.twin(position, op, slots)?;
+                    let (function, _) = self.twin(position, op, slots)?;
                     let source = slots.array(call.plan, op.inputs[0])?.clone();
                     let loader = self.builder.array_loader(&source);
                     let ty = elem_type_wgsl(source.ty, call.records);
@@ -206,7 +205,7 @@ impl Generator<'_, '_, '_> {
                     );
                 }
                 OpKind::Expand { .. } => {
-                    let function = self.twin(position, op, slots)?;
+                    let (function, _) = self.twin(position, op, slots)?;
                     let source = slots.array(call.plan, op.inputs[0])?.clone();
                     let loader = self.builder.array_loader(&source);
                     let k = self.builder.param_u32(values.group as u32);
@@ -414,23 +413,14 @@ impl Generator<'_, '_, '_> {
         Ok(array)
     }
 
-    fn functor_kind(&self, op: &Op) -> Result<FunctorKind, RunError> {
-        let name = op.functor.as_deref().unwrap_or_default();
-        let functor = self
-            .backend
-            .library
-            .get(name)
-            .ok_or_else(|| error(format!("functor `{name}` is not in this run's library")))?;
-        Ok(functor.signature().kind)
-    }
-
-    /// Asks the op's functor for its twin and adds it; returns its function name.
+    /// Asks the op's functor for its twin and adds it; returns its function
+    /// name and the functor's kind (which decides how it is called).
     fn twin(
         &mut self,
         position: usize,
         op: &Op,
         slots: &Slots<GpuArray>,
-    ) -> Result<String, RunError> {
+    ) -> Result<(String, FunctorKind), RunError> {
         let call = self.call;
         let name = op.functor.as_deref().unwrap_or_default();
         let functor = self
@@ -483,7 +473,7 @@ impl Generator<'_, '_, '_> {
         );
         self.builder.functions.push_str(&fail);
         self.twins.push(twin);
-        Ok(function)
+        Ok((function, functor.signature().kind))
     }
 
     /// Adds the twins' shared modules and scene buffers, then the twins themselves.
