@@ -172,8 +172,8 @@ struct RunArgs {
     compile: CompileArgs,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-enum Backend {
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(crate) enum Backend {
     /// rayon on every core.
     Cpu,
     /// wgpu on the first adapter found (`WGPU_BACKEND=vulkan|metal|dx12|gl` chooses).
@@ -360,7 +360,7 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             (result, run_start.elapsed())
         }
         Backend::Gpu => {
-            let gpu = GpuContext::new().map_err(|e| Failure::Run(format!("error: {e}")))?;
+            let gpu = GpuContext::new().map_err(|e| Failure::Run(e.to_string()))?;
             description.push_str(&format!("\nGPU: {}", gpu.adapter_name()));
             let context = GpuRunContext {
                 gpu: &gpu,

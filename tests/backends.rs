@@ -28,25 +28,6 @@ fn dpp(dir: &Path, args: &[&str]) -> Output {
         .unwrap()
 }
 
-/// Whether the GPU backend can start here (see the module documentation).
-fn gpu_available() -> bool {
-    let dir = tempfile::tempdir().unwrap();
-    let pipeline = common::repo().join("pipelines/examples/prefix_sum.dpp");
-    let output = dpp(
-        dir.path(),
-        &["run", pipeline.to_str().unwrap(), "--backend", "gpu"],
-    );
-    if output.status.success() {
-        return true;
-    }
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    if std::env::var_os("DPP_REQUIRE_GPU").is_some() {
-        panic!("DPP_REQUIRE_GPU is set but the GPU backend failed: {stderr}");
-    }
-    eprintln!("skipping the backend comparison: {stderr}");
-    false
-}
-
 /// Runs `dpp run PIPELINE ARGS --backend BACKEND` in `dir`; returns its stdout.
 fn run(dir: &Path, pipeline: &Path, args: &[String], backend: &str) -> String {
     let mut all = vec!["run".to_string(), pipeline.display().to_string()];
@@ -181,7 +162,7 @@ fn compare(name: &str, pipeline: &Path, comparison: &Comparison) {
 
 #[test]
 fn every_pipeline_agrees_on_both_backends() {
-    if !gpu_available() {
+    if !common::gpu_available("the backend comparison") {
         return;
     }
     for pipeline in common::pipeline_files() {
@@ -194,7 +175,7 @@ fn every_pipeline_agrees_on_both_backends() {
 
 #[test]
 fn the_builtin_scene_agrees_on_both_backends() {
-    if !gpu_available() {
+    if !common::gpu_available("the backend comparison") {
         return;
     }
     let pipeline = common::repo().join("pipelines/workload1.dpp");

@@ -107,6 +107,8 @@ fn a_tiny_bench_writes_tables_json_and_a_chart() {
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
             .unwrap();
+    assert_eq!(json["backend"], "cpu");
+    assert!(json.get("adapter").is_none());
     assert_eq!(json["threads"], 2);
     assert_eq!(json["size"], serde_json::json!([48, 32]));
     let scene = &json["scenes"][0];
@@ -172,6 +174,7 @@ fn bad_bench_input_is_exit_status_2() {
         (&["builtin:3"], "resolution must be in 8..=512"),
         (&["rm:1,2"], "rm:X,Y,Z"),
         (&["--size", "0x10"], "is empty"),
+        (&["--backend", "tpu"], "invalid value 'tpu'"),
     ];
     for (args, expected) in cases {
         let mut all: Vec<&str> = base.to_vec();
@@ -252,4 +255,131 @@ element face 1\nproperty list uchar int vertex_indices\nend_header\n"
     );
     assert_eq!(output.status.code(), Some(2));
     assert!(text(&output.stderr).contains("cut.ply: malformed PLY"));
+}
+
+#[test]
+fn embree_on_the_gpu_is_exit_status_2() {
+    // Checked before any device is opened: the same answer with or without a GPU.
+    let dir = tempfile::tempdir().unwrap();
+    let pipelines = pipelines();
+    for engine in ["embree", "dpp,embree"] {
+        let output = dpp(
+            &[
+                "bench",
+                "--pipelines",
+                &pipelines,
+                "--backend",
+                "gpu",
+                "--engine",
+                engine,
+            ],
+            dir.path(),
+        );
+        let stderr = text(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{engine}: {stderr}");
+        assert!(
+            stderr.contains("--engine embree runs on the CPU only"),
+            "{engine}: {stderr}"
+        );
+        assert_eq!(text(&output.stdout), "", "nothing was measured");
+    }
+}
+
+#[test]
+fn a_gpu_bench_without_an_adapter_is_a_clear_error() {
+    // No adapter of a backend this build lacks.
+    let dir = tempfile::tempdir().unwrap();
+    let output = Command::new(env!("CARGO_BIN_EXE_dpp"))
+        .args(["bench", "--pipelines", &pipelines(), "--backend", "gpu"])
+        .env("WGPU_BACKEND", "metal")
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let stderr = text(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("no GPU adapter found"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(text(&output.stdout), "");
+}
+
+#[test]
+fn a_tiny_gpu_bench_names_the_adapter_and_times_stages() {
+    if !common::gpu_available("the GPU bench") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let output = dpp(
+        &[
+            "bench",
+            "builtin:16",
+            "--backend",
+            "gpu",
+            "--size",
+            "64x48",
+            "--views",
+            "front",
+            "--workloads",
+            "1,2",
+            "--warmup",
+            "0",
+            "--rounds",
+            "1",
+            "--pipelines",
+            &pipelines(),
+            "--json",
+            "bench.json",
+            "--chart",
+            "bench.png",
+        ],
+        dir.path(),
+    );
+    let stdout = text(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{}\n{stdout}",
+        text(&output.stderr)
+    );
+
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["backend"], "gpu");
+    let adapter = json["adapter"]["name"].as_str().unwrap();
+    assert!(!adapter.is_empty());
+    assert!(json["adapter"]["backend"].is_string());
+    assert!(json["adapter"]["driver"].is_string());
+    let timing = json["stage_timing"].as_str().unwrap();
+    assert!(["timestamp queries", "host"].contains(&timing), "{timing}");
+    // The markdown header names the backend and the adapter, and how stages were timed.
+    assert!(stdout.contains("GPU backend: "), "{stdout}");
+    assert!(stdout.contains(adapter), "{stdout}");
+    assert!(stdout.contains("warm-up rounds absorb both"), "{stdout}");
+
+    let view = &json["scenes"][0]["views"][0];
+    assert_eq!(view["primary_rays"], 64 * 48);
+    let workloads = view["workloads"].as_array().unwrap();
+    assert_eq!(workloads.len(), 2);
+    for w in workloads {
+        for plan in ["fused", "unfused"] {
+            let m = &w[plan];
+            assert_eq!(m["frames_ms"].as_array().unwrap().len(), 1, "{m}");
+            assert_eq!(m["profiled_frames_ms"].as_array().unwrap().len(), 1, "{m}");
+            assert!(m["mean_frame_ms"].as_f64().unwrap() > 0.0, "{m}");
+            let stages = m["stages"].as_array().unwrap();
+            assert!(!stages.is_empty(), "{m}");
+            let total: f64 = stages.iter().map(|s| s["ms"].as_f64().unwrap()).sum();
+            assert!(total > 0.0, "stage times: {m}");
+        }
+    }
+    // WORKLOAD1's `map<intersect>` rate comes from the unfused plan's stage.
+    let unfused = &workloads[0]["unfused"];
+    let intersect = unfused["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["ops"] == "map<intersect>")
+        .expect("the unfused plan has `map<intersect>` alone");
+    assert_eq!(unfused["intersect_ms"], intersect["ms"]);
+    assert!(unfused["intersect_mrays_per_s"].as_f64().unwrap() > 0.0);
+    assert!(image::open(dir.path().join("bench.png")).unwrap().height() == 480);
 }

@@ -34,6 +34,14 @@ fn mrays(rays: u64, ms: f64) -> f64 {
     rays as f64 / (ms * 1e3)
 }
 
+/// What ran the plans, for the title: `2 threads` on the CPU, `GPU <adapter>`.
+fn on(report: &Report) -> String {
+    match &report.gpu {
+        None => format!("{} threads", report.threads),
+        Some(gpu) => format!("GPU {} ({})", gpu.name, gpu.api),
+    }
+}
+
 /// WORKLOAD1's rates when it ran (per engine, or the stage and the frame), else
 /// the frame rates of the other workloads, fused and unfused.
 fn chart_of(report: &Report) -> Chart {
@@ -88,8 +96,10 @@ fn chart_of(report: &Report) -> Chart {
         }
         Chart {
             title: format!(
-                "WORKLOAD1, {}x{}, {} threads",
-                report.size.0, report.size.1, report.threads
+                "WORKLOAD1, {}x{}, {}",
+                report.size.0,
+                report.size.1,
+                on(report)
             ),
             unit: "Mrays/s".into(),
             series,
@@ -108,8 +118,10 @@ fn chart_of(report: &Report) -> Chart {
         }
         Chart {
             title: format!(
-                "frames per second, {}x{}, {} threads",
-                report.size.0, report.size.1, report.threads
+                "frames per second, {}x{}, {}",
+                report.size.0,
+                report.size.1,
+                on(report)
             ),
             unit: "frames/s".into(),
             series: vec!["fused".into(), "unfused".into()],
@@ -121,8 +133,13 @@ fn chart_of(report: &Report) -> Chart {
 pub fn draw(report: &Report, path: &Path) -> Result<(), String> {
     let chart = chart_of(report);
     let group_width = 40 + 36 * chart.series.len() as u32;
+    // Wide enough for the bars and for the title (16 pixels a character, after
+    // the left margin), so that a long adapter name is not cut off.
+    let title_width = 70 + 16 * chart.title.chars().count() as u32 + 20;
     let (width, height) = (
-        (120 + group_width * chart.groups.len() as u32).max(640),
+        (120 + group_width * chart.groups.len() as u32)
+            .max(640)
+            .max(title_width),
         480u32,
     );
     let mut buffer = vec![255u8; (width * height * 3) as usize];

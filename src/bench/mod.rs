@@ -1,19 +1,26 @@
 //! `dpp bench`: the paper's measurement method (its §5). Every scene is loaded
 //! and its BVH built once (timed apart, never inside a frame); then for every
 //! view each workload runs warm-up rounds and measured rounds, fused and
-//! unfused, on the CPU backend. WORKLOAD1's rate is primary rays over the time
-//! of its `map<intersect>` stage (from the unfused plan, where that stage does
-//! nothing else) and over the whole frame; WORKLOAD2 and WORKLOAD3 report frames
-//! per second and the time of every stage. `--engine dpp,embree` also runs
-//! WORKLOAD1 with Embree behind `intersect` (single rays and 16-ray packets) and
-//! checks that both engines hit the same triangles.
+//! unfused, on the CPU backend or (`--backend gpu`) on the GPU backend, with one
+//! device opened for the whole bench. WORKLOAD1's rate is primary rays over the
+//! time of its `map<intersect>` stage (from the unfused plan, where that stage
+//! does nothing else) and over the whole frame; WORKLOAD2 and WORKLOAD3 report
+//! frames per second and the time of every stage. `--engine dpp,embree` (CPU
+//! only) also runs WORKLOAD1 with Embree behind `intersect` (single rays and
+//! 16-ray packets) and checks that both engines hit the same triangles.
+//!
+//! On the CPU a frame's stage times come from the measured run itself. On the
+//! GPU, profiling waits for the device after every stage, so the measured
+//! frames run without it and the stage times come from as many further runs
+//! with it (device time from timestamp queries where the adapter has them).
 
 mod chart;
 mod report;
 
 use crate::scene_setup::{self, SceneRequest, SceneSetup};
-use crate::{volume_setup, Failure};
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
+use crate::{volume_setup, Backend, Failure};
+use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext, RunResult, StageTiming};
+use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{CompileOptions, FunctorLibrary, Plan};
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
 use dpp_tracer::shading::MeshMaterials;
@@ -23,7 +30,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-pub use report::Report;
+pub use report::{GpuInfo, Report};
 
 /// Hits agree when both engines hit the same number of rays (give or take
 /// [`GRAZING_RAYS_PER_MILLION`]) and, for at least this share of the rays, name
@@ -68,8 +75,12 @@ pub struct BenchArgs {
     /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
+    /// The backend that runs the plans. `gpu` opens the first adapter wgpu
+    /// offers once for the whole bench (`WGPU_BACKEND`, `WGPU_ADAPTER_NAME` choose).
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    backend: Backend,
     /// Intersection engines for WORKLOAD1: `dpp`, or `dpp,embree` to compare with
-    /// Embree 3 (needs a build with `--features embree`).
+    /// Embree 3 (needs a build with `--features embree`; CPU backend only).
     #[arg(long, default_value = "dpp")]
     engine: String,
     /// The isosurface level for volume files.
@@ -227,6 +238,11 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
             }
         }
     }
+    if embree && args.backend != Backend::Cpu {
+        return Err(
+            "error: --engine embree runs on the CPU only: it cannot be combined with --backend gpu (use --engine dpp, or --backend cpu)".into(),
+        );
+    }
     if embree && !cfg!(feature = "embree") {
         return Err(
             "error: --engine embree: this dpp was built without Embree; rebuild with `cargo build --release --features embree` (needs libembree-dev)".into(),
@@ -274,9 +290,12 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
 /// of every stage.
 #[derive(Clone, Debug)]
 pub struct Measurement {
-    /// Wall time of each measured frame (`run_plan`), in ms.
+    /// Wall time of each measured frame (`run_plan`, `run_plan_gpu`), in ms.
     pub frames_ms: Vec<f64>,
     pub stages: Vec<StageTime>,
+    /// On the GPU: wall time of each profiled run the stage times come from
+    /// (profiling waits after every stage, so these are slower). Empty on the CPU.
+    pub profiled_frames_ms: Vec<f64>,
 }
 
 #[derive(Clone, Debug)]
@@ -385,6 +404,14 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         .build()
         .map_err(|e| Failure::Input(format!("error: cannot start threads: {e}")))?;
     let threads = pool.current_num_threads();
+    // Opened once, before anything is measured: device creation is never part of a frame.
+    let gpu = match args.backend {
+        Backend::Cpu => None,
+        Backend::Gpu => {
+            Some(GpuContext::new().map_err(|e| Failure::Run(format!("--backend gpu: {e}")))?)
+        }
+    };
+    let gpu = gpu.as_ref();
 
     let mut plans = Vec::new();
     for &workload in &setup.workloads {
@@ -394,7 +421,9 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         plans.push((workload, path, fused, unfused));
     }
 
-    let rounds = u64::from(args.warmup + args.rounds);
+    // On the GPU the stage times come from as many profiled runs as measured ones.
+    let profiled = if gpu.is_some() { args.rounds } else { 0 };
+    let rounds = u64::from(args.warmup + args.rounds + profiled);
     let per_view = 2 * setup.workloads.len() as u64 + if setup.embree { 4 } else { 0 };
     let total = setup.scenes.len() as u64 * setup.views.len() as u64 * per_view * rounds;
     let progress = progress_bar(total);
@@ -445,13 +474,15 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                     format!("{} {view_name} workload{workload} {fusion}", spec.name())
                 };
                 progress.set_message(label("fused"));
-                let (fused, _) = measure(fused, library, &view, &pool, &args, &progress, false)?;
+                let (fused, _) =
+                    measure(fused, library, &view, &pool, gpu, &args, &progress, false)?;
                 progress.set_message(label("unfused"));
                 let (unfused, prims) = measure(
                     unfused,
                     library,
                     &view,
                     &pool,
+                    gpu,
                     &args,
                     &progress,
                     *workload == 1,
@@ -482,10 +513,12 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                         spec.name(),
                         engine.name()
                     ));
-                    let (fused, _) =
-                        measure(&fused, &swapped, &view, &pool, &args, &progress, false)?;
-                    let (unfused, prims) =
-                        measure(&unfused, &swapped, &view, &pool, &args, &progress, true)?;
+                    let (fused, _) = measure(
+                        &fused, &swapped, &view, &pool, None, &args, &progress, false,
+                    )?;
+                    let (unfused, prims) = measure(
+                        &unfused, &swapped, &view, &pool, None, &args, &progress, true,
+                    )?;
                     let prims = prims.expect("workload1 outputs prim and depth");
                     view_result
                         .engines
@@ -501,6 +534,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
 
     let report = Report {
         cpu: cpu_model(),
+        gpu: gpu.map(GpuInfo::of),
         threads,
         size: args.size,
         warmup: args.warmup,
@@ -683,49 +717,65 @@ fn iso_mesh(
 }
 
 /// Runs `plan` for the warm-up and measured rounds; with `keep_prims`, also
-/// returns the `prim` and `depth` outputs of the last round.
+/// returns the `prim` and `depth` outputs of the last measured round. On the
+/// GPU (`gpu`), the measured rounds run without profiling (which would wait for
+/// the device after every stage) and `args.rounds` profiled runs follow them
+/// for the stage times.
+#[allow(clippy::too_many_arguments)]
 fn measure(
     plan: &Plan,
     library: &FunctorLibrary,
     view: &SceneSetup,
     pool: &rayon::ThreadPool,
+    gpu: Option<&GpuContext>,
     args: &BenchArgs,
     progress: &ProgressBar,
     keep_prims: bool,
 ) -> Result<(Measurement, Option<Hits>), Failure> {
-    let context = RunContext {
-        library,
-        uniforms: &view.uniforms,
-        resources: &view.resources,
-        chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
-    };
-    let mut frames_ms = Vec::new();
-    let mut stages: Vec<StageTime> = Vec::new();
-    let mut prims = None;
-    for round in 0..args.warmup + args.rounds {
+    // One frame: the whole run on the host, from the uniforms to the outputs in
+    // host memory (the GPU backend returns once they are downloaded).
+    let frame = |profile: bool| -> Result<(RunResult, Duration), Failure> {
         let start = Instant::now();
-        let result = pool
-            .install(|| run_plan(plan, &context))
-            .map_err(|e| Failure::Run(format!("{}: {e}", plan.pipeline)))?;
+        let result = match gpu {
+            None => {
+                let context = RunContext {
+                    library,
+                    uniforms: &view.uniforms,
+                    resources: &view.resources,
+                    chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
+                };
+                pool.install(|| run_plan(plan, &context))
+            }
+            Some(gpu) => {
+                let context = GpuRunContext {
+                    gpu,
+                    library,
+                    uniforms: &view.uniforms,
+                    resources: &view.resources,
+                    profile,
+                };
+                pool.install(|| run_plan_gpu(plan, &context))
+            }
+        }
+        .map_err(|e| Failure::Run(format!("{}: {e}", plan.pipeline)))?;
         let elapsed = start.elapsed();
         progress.inc(1);
+        Ok((result, elapsed))
+    };
+    let mut measurement = Measurement {
+        frames_ms: Vec::new(),
+        stages: Vec::new(),
+        profiled_frames_ms: Vec::new(),
+    };
+    let mut prims = None;
+    for round in 0..args.warmup + args.rounds {
+        let (result, elapsed) = frame(false)?;
         if round < args.warmup {
             continue;
         }
-        frames_ms.push(ms(elapsed));
-        if stages.is_empty() {
-            stages = result
-                .profile
-                .iter()
-                .map(|t| StageTime {
-                    stage: t.stage,
-                    label: t.label.clone(),
-                    ms: 0.0,
-                })
-                .collect();
-        }
-        for (stage, timing) in stages.iter_mut().zip(&result.profile) {
-            stage.ms += ms(timing.time) / f64::from(args.rounds);
+        measurement.frames_ms.push(ms(elapsed));
+        if gpu.is_none() {
+            add_stages(&mut measurement.stages, &result.profile, args.rounds);
         }
         if keep_prims && round + 1 == args.warmup + args.rounds {
             let output = |name: &str| {
@@ -746,7 +796,31 @@ fn measure(
             }
         }
     }
-    Ok((Measurement { frames_ms, stages }, prims))
+    if gpu.is_some() {
+        for _ in 0..args.rounds {
+            let (result, elapsed) = frame(true)?;
+            measurement.profiled_frames_ms.push(ms(elapsed));
+            add_stages(&mut measurement.stages, &result.profile, args.rounds);
+        }
+    }
+    Ok((measurement, prims))
+}
+
+/// Adds one run's stage times to the means over `rounds` runs.
+fn add_stages(stages: &mut Vec<StageTime>, profile: &[StageTiming], rounds: u32) {
+    if stages.is_empty() {
+        *stages = profile
+            .iter()
+            .map(|t| StageTime {
+                stage: t.stage,
+                label: t.label.clone(),
+                ms: 0.0,
+            })
+            .collect();
+    }
+    for (stage, timing) in stages.iter_mut().zip(profile) {
+        stage.ms += ms(timing.time) / f64::from(rounds);
+    }
 }
 
 /// Hit counts, and the shares of rays on which both engines name the same
@@ -851,6 +925,7 @@ mod tests {
         let m = Measurement {
             frames_ms: vec![1.0],
             stages: vec![],
+            profiled_frames_ms: vec![],
         };
         let miss = MISS_PRIM;
         let prim: Vec<u32> = (0..2000)

@@ -2,11 +2,67 @@
 //! tables) and as JSON.
 
 use super::{Engine, Measurement, SceneResult, AGREEMENT};
+use dpp_runtime::gpu::GpuContext;
 use serde_json::{json, Value};
 use std::fmt::Write;
 
+/// The adapter a `--backend gpu` bench ran on (wgpu's `AdapterInfo`), and how
+/// its stages were timed.
+#[derive(Clone, Debug)]
+pub struct GpuInfo {
+    pub name: String,
+    /// The API wgpu drives it through: Vulkan, Metal, Dx12, Gl.
+    pub api: String,
+    pub device_type: String,
+    pub driver: String,
+    pub driver_info: String,
+    /// Whether the adapter has timestamp queries (stage times on the device).
+    pub timestamps: bool,
+}
+
+impl GpuInfo {
+    pub fn of(gpu: &GpuContext) -> GpuInfo {
+        GpuInfo {
+            name: gpu.info.name.clone(),
+            api: format!("{:?}", gpu.info.backend),
+            device_type: format!("{:?}", gpu.info.device_type),
+            driver: gpu.info.driver.clone(),
+            driver_info: gpu.info.driver_info.clone(),
+            timestamps: gpu.timestamps,
+        }
+    }
+
+    /// `llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan, Cpu; driver llvmpipe, Mesa 22.3.6)`.
+    pub fn describe(&self) -> String {
+        let driver = [self.driver.as_str(), self.driver_info.as_str()]
+            .into_iter()
+            .filter(|s| !s.is_empty())
+            .collect::<Vec<_>>()
+            .join(", ");
+        if driver.is_empty() {
+            format!("{} ({}, {})", self.name, self.api, self.device_type)
+        } else {
+            format!(
+                "{} ({}, {}; driver {driver})",
+                self.name, self.api, self.device_type
+            )
+        }
+    }
+
+    /// What the stage times are.
+    fn stage_timing(&self) -> &'static str {
+        if self.timestamps {
+            "timestamp queries"
+        } else {
+            "host"
+        }
+    }
+}
+
 pub struct Report {
     pub cpu: String,
+    /// The adapter, when the GPU backend ran the plans; `None` for the CPU backend.
+    pub gpu: Option<GpuInfo>,
     pub threads: usize,
     pub size: (u32, u32),
     pub warmup: u32,
@@ -16,6 +72,10 @@ pub struct Report {
 
 fn mrays(rays: u64, ms: f64) -> f64 {
     rays as f64 / (ms * 1e3)
+}
+
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len().max(1) as f64
 }
 
 impl Report {
@@ -38,11 +98,38 @@ impl Report {
         let mut md = String::new();
         let (width, height) = self.size;
         let _ = writeln!(md, "# dpp bench\n");
-        let _ = writeln!(
-            md,
-            "{} ({} threads), {width}x{height}, {} warm-up + {} measured rounds per plan (times are means).\n",
-            self.cpu, self.threads, self.warmup, self.rounds
-        );
+        match &self.gpu {
+            None => {
+                let _ = writeln!(
+                    md,
+                    "{} ({} threads), {width}x{height}, {} warm-up + {} measured rounds per plan (times are means).\n",
+                    self.cpu, self.threads, self.warmup, self.rounds
+                );
+            }
+            Some(gpu) => {
+                let _ = writeln!(
+                    md,
+                    "GPU backend: {}; host {} ({} threads), {width}x{height}, {} warm-up + {} measured rounds per plan (times are means).\n",
+                    gpu.describe(),
+                    self.cpu,
+                    self.threads,
+                    self.warmup,
+                    self.rounds
+                );
+                let timing = if gpu.timestamps {
+                    "device time, from timestamp queries at the start and end of each stage's compute pass (host time around the wait where the driver reports none)"
+                } else {
+                    "host time, from submitting each stage to the end of the wait for it (this adapter has no timestamp queries)"
+                };
+                let _ = writeln!(
+                    md,
+                    "The device is opened once for the whole bench, outside every frame. A plan's first run on the device compiles its kernels and a scene's first run uploads the scene's buffers: the warm-up rounds absorb both (with `--warmup 0` they fall in the first measured frame). A frame is the host's wall time of a whole run: uniforms, every stage, waiting for the device, and the outputs downloaded to host memory; the measured frames run without profiling. Stage times come from {} further run{} with profiling, which wait{} for the device after every stage: {timing}.\n",
+                    self.rounds,
+                    if self.rounds == 1 { "" } else { "s" },
+                    if self.rounds == 1 { "s" } else { "" },
+                );
+            }
+        }
 
         let _ = writeln!(md, "## Scenes\n");
         let embree = self.scenes.iter().any(|s| s.embree_build_ms.is_some());
@@ -220,9 +307,21 @@ impl Report {
                     };
                     let views = measurements.len() as f64;
                     let frame = measurements.iter().map(|m| m.mean_ms()).sum::<f64>() / views;
+                    // A stage's share is of the frame its time comes from: on the
+                    // GPU, the profiled runs'.
+                    let (profiled, whole) = if self.gpu.is_some() {
+                        let profiled = measurements
+                            .iter()
+                            .map(|m| mean(&m.profiled_frames_ms))
+                            .sum::<f64>()
+                            / views;
+                        (format!("; {profiled:.1} ms profiled"), profiled)
+                    } else {
+                        (String::new(), frame)
+                    };
                     let _ = writeln!(
                         md,
-                        "{} WORKLOAD{workload}, {} ({} stages, frame {frame:.1} ms):\n",
+                        "{} WORKLOAD{workload}, {} ({} stages, frame {frame:.1} ms{profiled}):\n",
                         scene.name,
                         if fused { "fused" } else { "unfused" },
                         first.stages.len()
@@ -242,7 +341,7 @@ impl Report {
                             stage.stage,
                             stage.label,
                             mean,
-                            100.0 * mean / frame
+                            100.0 * mean / whole
                         );
                     }
                     md.push('\n');
@@ -267,6 +366,9 @@ impl Report {
                     "ms": s.ms,
                 })).collect::<Vec<_>>(),
             });
+            if self.gpu.is_some() {
+                value["profiled_frames_ms"] = json!(m.profiled_frames_ms);
+            }
             if let Some(rays) = rays {
                 value["frame_mrays_per_s"] = json!(mrays(rays, m.mean_ms()));
                 if let Some(t) = m.intersect_ms() {
@@ -338,7 +440,8 @@ impl Report {
                 })
             })
             .collect();
-        json!({
+        let mut report = json!({
+            "backend": if self.gpu.is_some() { "gpu" } else { "cpu" },
             "cpu": self.cpu,
             "threads": self.threads,
             "size": [self.size.0, self.size.1],
@@ -346,6 +449,17 @@ impl Report {
             "measured_rounds": self.rounds,
             "dpp_version": env!("CARGO_PKG_VERSION"),
             "scenes": scenes,
-        })
+        });
+        if let Some(gpu) = &self.gpu {
+            report["adapter"] = json!({
+                "name": gpu.name,
+                "backend": gpu.api,
+                "device_type": gpu.device_type,
+                "driver": gpu.driver,
+                "driver_info": gpu.driver_info,
+            });
+            report["stage_timing"] = json!(gpu.stage_timing());
+        }
+        report
     }
 }

@@ -7,6 +7,29 @@ pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// Whether the GPU backend can start here: `dpp run --backend gpu` on a tiny
+/// example pipeline. Without an adapter it prints why `what` is skipped and
+/// returns false, unless the environment variable `DPP_REQUIRE_GPU` is set (CI
+/// sets it and installs Mesa's lavapipe): then the test fails.
+pub fn gpu_available(what: &str) -> bool {
+    let dir = tempfile::tempdir().unwrap();
+    let pipeline = repo().join("pipelines/examples/prefix_sum.dpp");
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_dpp"))
+        .args(["run", pipeline.to_str().unwrap(), "--backend", "gpu"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    if output.status.success() {
+        return true;
+    }
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    if std::env::var_os("DPP_REQUIRE_GPU").is_some() {
+        panic!("DPP_REQUIRE_GPU is set but the GPU backend failed: {stderr}");
+    }
+    eprintln!("skipping {what}: {stderr}");
+    false
+}
+
 /// Every `.dpp` file under `pipelines/` that holds a pipeline (the prelude holds only fns).
 pub fn pipeline_files() -> Vec<PathBuf> {
     fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
