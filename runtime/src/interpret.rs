@@ -467,7 +467,8 @@ impl<'a, B: Backend> Interpreter<'a, B> {
     }
 }
 
-/// Whether `op` ends its stage by combining all elements (scatter, reduce, scan).
+/// Whether `op` combines its stage's elements into a result that is complete
+/// only when the stage ends (scatter, reduce, scan).
 pub fn is_sink(op: &Op) -> bool {
     matches!(
         op.kind,
@@ -476,17 +477,18 @@ pub fn is_sink(op: &Op) -> bool {
 }
 
 /// The variables a stage writes element by element: everything it
-/// materialises but a sink's result, which the sink assembles itself.
+/// materialises but its sinks' results, which each sink assembles itself.
 pub fn elementwise_materialised(stage: &Stage) -> Vec<VarId> {
-    let sink_output = stage
+    let sink_outputs: Vec<VarId> = stage
         .ops
-        .last()
+        .iter()
         .filter(|op| is_sink(op))
-        .map(|op| op.outputs[0]);
+        .map(|op| op.outputs[0])
+        .collect();
     stage
         .materialises
         .iter()
         .copied()
-        .filter(|v| Some(*v) != sink_output)
+        .filter(|v| !sink_outputs.contains(v))
         .collect()
 }

@@ -104,27 +104,21 @@ fn rule1_an_intermediate_read_elsewhere_is_materialised() {
         }
         "#,
         @"
-    pipeline p (fused, 2 stages)
+    pipeline p (fused, 1 stages)
     param n: int = 6
     let n: int = 6
-    stage 1 [iota → map<toF32> → map<add> → map<mul>] {
+    stage 1 [iota → map<toF32> → map<add> → map<mul> → reduce<add>] {
       over n
       %1 = iota(n)
       a = map<toF32>(%1)
       b = map<add>(a, a)
       c = map<mul>(b, b)
-      reads direct: -; indexed: -; uniform: n
-      materialises b: f32, c: f32
-      ends at control flow
-    }
-    out c = c
-    stage 2 [reduce<add>] {
-      over n
       %8 = reduce<add>(b)
-      reads direct: b: f32; indexed: -; uniform: -
-      materialises %8: float
+      reads direct: -; indexed: -; uniform: n
+      materialises c: f32, %8: float
       ends at reduce result read by the host
     }
+    out c = c
     let total: float = %8
     out total = total
     ---
@@ -157,6 +151,7 @@ fn rule1_maps_over_different_lengths_do_not_fuse() {
       materialises c: f32
       ends at control flow
     }
+    out c = c
     stage 2 [iota → map<toF32>] {
       over 4
       %0 = iota(4)
@@ -166,7 +161,6 @@ fn rule1_maps_over_different_lengths_do_not_fuse() {
       ends at control flow
     }
     out a = a
-    out c = c
     ---
     a = [0.0, 1.0, 2.0, 3.0]
     c = [0.0, 2.0, 4.0, 6.0, 8.0]
@@ -270,7 +264,7 @@ fn rule3_maps_run_inside_scatter_reduce_and_scan() {
         }
         "#,
         @"
-    pipeline p (fused, 5 stages)
+    pipeline p (fused, 4 stages)
     param n: int = 8
     let n: int = 8
     stage 1 [iota → map<mul> → reduce<add>] {
@@ -294,34 +288,28 @@ fn rule3_maps_run_inside_scatter_reduce_and_scan() {
       ends at scan
     }
     out prefix = prefix
-    stage 3 [fill → map<sub> → map<toF32> → scatter] {
+    stage 3 [fill] {
+      over 2
+      %19 = fill(2, 0)
+      reads direct: -; indexed: -; uniform: -
+      materialises %19: u32
+      ends at control flow
+    }
+    stage 4 [fill → map<sub> → map<toF32> → scatter → fill → map<lt> → map<toU32> → scatter<add>] {
       over n
       %10 = fill(n, n - 1)
       %11 = map<sub>(%10, x)
       %12 = map<toF32>(x)
       reversed = scatter(%11, %12, len: n)
-      reads direct: x: u32; indexed: -; uniform: n
-      materialises reversed: f32
-      ends at scatter
-    }
-    out reversed = reversed
-    stage 4 [fill] {
-      over 2
-      %19 = fill(2, 0)
-      reads direct: -; indexed: -; uniform: -
-      materialises %19: u32
-      ends at length change
-    }
-    stage 5 [fill → map<lt> → map<toU32> → scatter<add>] {
-      over n
       %15 = fill(n, 3)
       %16 = map<lt>(x, %15)
       %17 = map<toU32>(%16)
       counts = scatter<add>(%17, %6, into: %19)
       reads direct: x: u32, %6: u32; indexed: %19: u32; uniform: n
-      materialises counts: u32
-      ends at scatter
+      materialises reversed: f32, counts: u32
+      ends at control flow
     }
+    out reversed = reversed
     out counts = counts
     ---
     total = 140
@@ -477,7 +465,7 @@ fn rule4_compaction_changes_the_length() {
       %14 = scatter(slot, %13, len: n#1, mask: keep)
       reads direct: slot: u32, keep: bool; indexed: -; uniform: len(keep), n#1
       materialises %14: u32
-      ends at scatter
+      ends at length change
     }
     stage 4 [gather → map<add>] {
       over n#1
@@ -642,6 +630,7 @@ fn a_slot_written_from_another_length_does_not_join_the_stage() {
         materialises y: f32
         ends at length change
       }
+      out y = y
       stage 4 [map<add>] {
         over 4
         x = map<add>(z, z)
@@ -649,7 +638,6 @@ fn a_slot_written_from_another_length_does_not_join_the_stage() {
         materialises x: u32
         ends at control flow
       }
-      out y = y
     }
     out x = x
     ---
@@ -709,6 +697,7 @@ fn a_length_recorded_before_its_slot_was_rewritten_is_not_reused() {
         materialises x: u32
         ends at length change
       }
+      out b = b
       stage 5 [iota] {
         over len(x)
         c = iota(len(x))
@@ -716,7 +705,6 @@ fn a_length_recorded_before_its_slot_was_rewritten_is_not_reused() {
         materialises c: u32
         ends at control flow
       }
-      out b = b
       out c = c
     }
     ---
@@ -762,6 +750,7 @@ fn a_length_that_reads_a_rebound_host_value_is_not_reused() {
         materialises c: u32
         ends at control flow
       }
+      out c = c
       stage 3 [map<toF32>] {
         over len(a)
         b = map<toF32>(a)
@@ -770,7 +759,6 @@ fn a_length_that_reads_a_rebound_host_value_is_not_reused() {
         ends at control flow
       }
       out b = b
-      out c = c
     }
     ---
     b = [0.0, 1.0, 2.0, 3.0]
@@ -805,5 +793,209 @@ fn rule3_a_scatter_fuses_with_its_maps_past_the_into_array() {
                 && labels.contains(&"scatter<add>".to_string())
         }),
         "{text}"
+    );
+}
+
+/// A scatter is not a barrier (rule 4 does not list it): several scatters over
+/// the rays of one pass share its stage, and the values only they read are
+/// never materialised. Reading a scatter's result needs the whole of it, so
+/// the op that does starts a new stage; an `out` moves after its stage.
+#[test]
+fn scatters_share_a_stage_until_one_is_read() {
+    check!(
+        r#"
+        param n = 6
+        pipeline p {
+            x = iota(n)
+            y = map<mul>(x, x) → map<toF32>
+            back = map<sub>(fill(n, n - 1), x)
+            out a = scatter(back, y, len: n)
+            out b = scatter(back, x, len: n)
+            out c = map<add>(a, fill(len(y), 1.0))
+        }
+        "#,
+        @"
+    pipeline p (fused, 2 stages)
+    param n: int = 6
+    let n: int = 6
+    stage 1 [iota → map<mul> → map<toF32> → fill → map<sub> → scatter → scatter → fill] {
+      over n
+      x = iota(n)
+      %3 = map<mul>(x, x)
+      y = map<toF32>(%3)
+      %6 = fill(n, n - 1)
+      back = map<sub>(%6, x)
+      a = scatter(back, y, len: n)
+      b = scatter(back, x, len: n)
+      %13 = fill(n, 1.0)
+      reads direct: -; indexed: -; uniform: n
+      materialises a: f32, b: u32, %13: f32
+      ends at scatter
+    }
+    out a = a
+    out b = b
+    stage 2 [map<add>] {
+      over n
+      c = map<add>(a, %13)
+      reads direct: a: f32, %13: f32; indexed: -; uniform: -
+      materialises c: f32
+      ends at control flow
+    }
+    out c = c
+    ---
+    a = [25.0, 16.0, 9.0, 4.0, 1.0, 0.0]
+    b = [5, 4, 3, 2, 1, 0]
+    c = [26.0, 17.0, 10.0, 5.0, 2.0, 1.0]
+    "
+    );
+}
+
+/// `len(v)` of a value the stage makes becomes `v`'s symbolic length, so the
+/// `fill` joins the stage instead of waiting for `v` to be stored.
+#[test]
+fn the_length_of_a_value_of_the_stage_is_its_symbolic_length() {
+    check!(
+        r#"
+        param n = 5
+        pipeline p {
+            x = iota(n) → map<toF32>
+            out y = map<add>(x, fill(len(x), 0.5))
+        }
+        "#,
+        @"
+    pipeline p (fused, 1 stages)
+    param n: int = 5
+    let n: int = 5
+    stage 1 [iota → map<toF32> → fill → map<add>] {
+      over n
+      %1 = iota(n)
+      x = map<toF32>(%1)
+      %4 = fill(n, 0.5)
+      y = map<add>(x, %4)
+      reads direct: -; indexed: -; uniform: n
+      materialises y: f32
+      ends at control flow
+    }
+    out y = y
+    ---
+    y = [0.5, 1.5, 2.5, 3.5, 4.5]
+    "
+    );
+}
+
+/// What a scatter reads, and its result, must keep their values until its
+/// stage ends: an op over the same length that rewrites them (loop slots)
+/// starts a new stage.
+#[test]
+fn rewriting_what_a_scatter_reads_starts_a_new_stage() {
+    check!(
+        r#"
+        param n = 4
+        pipeline p {
+            x = iota(n) → map<toF32>
+            s = fill(n, 0.0)
+            for k in 0..2 {
+                s = scatter(iota(n), x, len: n)
+                x = fill(n, 2.0)
+                s = map<add>(fill(n, 1.0), fill(n, 1.0))
+            }
+            out s = s
+            out x = x
+        }
+        "#,
+        @"
+    pipeline p (fused, 3 stages)
+    param n: int = 4
+    let n: int = 4
+    stage 1 [iota → map<toF32> → fill] {
+      over n
+      %1 = iota(n)
+      x = map<toF32>(%1)
+      s = fill(n, 0.0)
+      reads direct: -; indexed: -; uniform: n
+      materialises %1: u32, x: f32, s: f32
+      ends at control flow
+    }
+    for k in 0..2 {
+      stage 2 [scatter] {
+        over n
+        s = scatter(%1, x, len: n)
+        reads direct: %1: u32, x: f32; indexed: -; uniform: n
+        materialises s: f32
+        ends at scatter
+      }
+      stage 3 [fill → fill → map<add>] {
+        over n
+        x = fill(n, 2.0)
+        %10 = fill(n, 1.0)
+        s = map<add>(%10, %10)
+        reads direct: -; indexed: -; uniform: n
+        materialises x: f32, s: f32
+        ends at control flow
+      }
+    }
+    let s#1 = s
+    out s = s#1
+    let x#1 = x
+    out x = x#1
+    ---
+    s = [2.0, 2.0, 2.0, 2.0]
+    x = [2.0, 2.0, 2.0, 2.0]
+    "
+    );
+}
+
+/// The histogram pattern: the `into:` array is made over the bins, before the
+/// scatter's stage (a side stage of another length); the reduce over the bins
+/// that follows fits that side stage but reads the scatter's result. The side
+/// stage must still run first, so both stages end there.
+#[test]
+fn a_side_stage_the_open_stage_reads_runs_first() {
+    check!(
+        r#"
+        param n = 8
+        pipeline p {
+            bin = iota(n) → map<lt>(fill(n, 3)) → map<toU32>
+            out counts = scatter<add>(bin, fill(n, 1), into: fill(2, 0))
+            out total = reduce<add>(counts)
+        }
+        "#,
+        @"
+    pipeline p (fused, 3 stages)
+    param n: int = 8
+    let n: int = 8
+    stage 1 [fill] {
+      over 2
+      %7 = fill(2, 0)
+      reads direct: -; indexed: -; uniform: -
+      materialises %7: u32
+      ends at length change
+    }
+    stage 2 [iota → fill → map<lt> → map<toU32> → fill → scatter<add>] {
+      over n
+      %1 = iota(n)
+      %2 = fill(n, 3)
+      %3 = map<lt>(%1, %2)
+      bin = map<toU32>(%3)
+      %6 = fill(n, 1)
+      counts = scatter<add>(bin, %6, into: %7)
+      reads direct: -; indexed: %7: u32; uniform: n
+      materialises counts: u32
+      ends at length change
+    }
+    out counts = counts
+    stage 3 [reduce<add>] {
+      over 2
+      %10 = reduce<add>(counts)
+      reads direct: counts: u32; indexed: -; uniform: -
+      materialises %10: int
+      ends at reduce result read by the host
+    }
+    let total: int = %10
+    out total = total
+    ---
+    counts = [5, 3]
+    total = 8
+    "
     );
 }

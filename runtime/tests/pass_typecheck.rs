@@ -205,8 +205,7 @@ fn record_fields_have_the_fields_types_and_the_records_length() {
     pairs.b: f32, len = n
     b: f32, len = n
     ---
-    [iota → map<makePair> → .a] over n
-    [map<add>] over n
+    [iota → map<makePair> → .a → .b → map<add>] over n
     "
     );
 }
@@ -356,8 +355,8 @@ fn host_expression_types() {
     flags: bool, len = n
     ---
     [iota] over n
-    [fill] over ((a + c) + l) + m
     [fill] over n
+    [fill] over ((a + c) + l) + m
     "
     );
 }
@@ -476,13 +475,12 @@ fn symbolic_lengths_of_fan_out_group_gather_and_compaction() {
     ---
     [iota → map<toF32>] over n * k
     [gather<sum>] over (n * k) / k
-    [scatter<repeat>] over ((n * k) / k) * k
-    [fill → map<lt> → map<toU32> → exclusiveScan<add>] over ((n * k) / k) * k
+    [scatter<repeat> → fill → map<lt> → map<toU32> → exclusiveScan<add>] over ((n * k) / k) * k
     [reduce<add>] over ((n * k) / k) * k
     [iota → scatter] over ((n * k) / k) * k
     [iota → scatter] over n
-    [fill] over n * 2
     [gather] over count
+    [fill] over n * 2
     [scatter<add>] over n
     "
     );

@@ -4,6 +4,13 @@
 //! scatter, reduce or scan that consumes it (rule 3). Stages end at the
 //! barriers of rule 4. An intermediate that nothing outside its stage reads is
 //! never materialised.
+//!
+//! A scatter is not a barrier (the spec's rule 4 does not list it): ops after
+//! it go on in its stage, so one stage can end in several scatters (a tracer's
+//! colour, depth and alpha images from one pass over the rays). Its result is
+//! complete only when the stage ends, so an op that reads it, or rewrites what
+//! it reads or writes, starts a new stage. An `out` statement does not end a
+//! stage either: it moves after the stage that makes its value.
 
 use super::ir::*;
 use super::typecheck::node_writes;
@@ -74,6 +81,12 @@ struct OpenStage {
     index_space: Option<HostExpr>,
     /// Variables written by the stage's ops.
     locals: HashSet<VarId>,
+    /// Results of the stage's scatters, complete only when the stage ends.
+    scattered: HashSet<VarId>,
+    /// Arrays the stage's scatters read: they must keep their values until it ends.
+    scatter_reads: HashSet<VarId>,
+    /// `out` statements of values the stage makes, placed after it.
+    outputs: Vec<Node>,
 }
 
 impl OpenStage {
@@ -82,6 +95,13 @@ impl OpenStage {
         self.ops
             .iter()
             .any(|op| node_reads(&Node::Op(op.clone())).contains(&var))
+    }
+
+    fn output_vars(&self) -> impl Iterator<Item = VarId> + '_ {
+        self.outputs.iter().filter_map(|node| match node {
+            Node::Output { var, .. } => Some(*var),
+            _ => None,
+        })
     }
 }
 
@@ -124,7 +144,18 @@ impl StageFormer<'_> {
                         field,
                     });
                 }
-                Node::Op(op) => {
+                Node::Output { var, .. } if self.fuse => {
+                    // After the stage that makes the value, or here if none open does.
+                    match [&mut side, &mut open]
+                        .into_iter()
+                        .flatten()
+                        .find(|stage| stage.locals.contains(&var))
+                    {
+                        Some(stage) => stage.outputs.push(node),
+                        None => out.push(node),
+                    }
+                }
+                Node::Op(mut op) => {
                     let joins_open = open.as_ref().map(|stage| self.joins(stage, &op));
                     let independent = open
                         .as_ref()
@@ -137,12 +168,26 @@ impl StageFormer<'_> {
                         _ if independent && side_fits => true,
                         (Some(Err(_)), true, false) => true,
                         // It needs the open stage's results: that stage ends, and the
-                        // side stage (independent of it) carries on as the open one.
+                        // side stage (independent of it) carries on as the open one,
+                        // unless the open stage reads what the side stage makes: then
+                        // the side stage must run first, and both end.
                         _ if side_fits => {
-                            if let Some(stage) = open.take() {
-                                out.extend(self.close(stage, Barrier::LengthChange));
+                            let side_first =
+                                open.as_ref()
+                                    .zip(side.as_ref())
+                                    .is_some_and(|(open, side)| {
+                                        side.locals.iter().any(|&v| open.reads(v))
+                                    });
+                            if side_first {
+                                for stage in [side.take(), open.take()].into_iter().flatten() {
+                                    out.extend(self.close(stage, Barrier::LengthChange));
+                                }
+                            } else {
+                                if let Some(stage) = open.take() {
+                                    out.extend(self.close(stage, Barrier::LengthChange));
+                                }
+                                open = side.take();
                             }
-                            open = side.take();
                             false
                         }
                         (joins_open, _, _) => {
@@ -161,15 +206,37 @@ impl StageFormer<'_> {
                         index_space: self.index_space(&op),
                         ops: Vec::new(),
                         locals: HashSet::new(),
+                        scattered: HashSet::new(),
+                        scatter_reads: HashSet::new(),
+                        outputs: Vec::new(),
                     });
+                    // `len(v)` of a value the stage makes does not exist before
+                    // the stage runs: `joins` checked that its symbolic length does.
+                    let reads_before = node_reads(&Node::Op(op.clone()));
+                    for expr in op.host_exprs_mut() {
+                        *expr = self.detached(expr, &stage.locals);
+                    }
+                    let reads_after = node_reads(&Node::Op(op.clone()));
+                    let mut no_longer_read: Vec<VarId> = reads_before
+                        .into_iter()
+                        .filter(|v| !reads_after.contains(v))
+                        .collect();
+                    no_longer_read.sort();
+                    no_longer_read.dedup();
+                    for v in no_longer_read {
+                        self.usage.reads[v.0 as usize] -= 1;
+                    }
                     stage.locals.extend(op.outputs.iter().copied());
+                    if matches!(op.kind, OpKind::Scatter { .. }) {
+                        stage.scattered.extend(op.outputs.iter().copied());
+                        stage.scatter_reads.extend(op.array_reads());
+                    }
                     for &output in &op.outputs {
                         self.wrote(output);
                     }
                     let sink = match op.kind {
                         OpKind::Scan { .. } => Some(Barrier::Scan),
                         OpKind::Reduce { .. } => Some(Barrier::Reduce),
-                        OpKind::Scatter { .. } => Some(Barrier::Scatter),
                         _ => None,
                     };
                     stage.ops.push(op);
@@ -276,6 +343,24 @@ impl StageFormer<'_> {
         }
     }
 
+    /// `expr` with `len(v)` of each value `v` in `locals` replaced by `v`'s
+    /// symbolic length, where that is known and still holds.
+    fn detached(&self, expr: &HostExpr, locals: &HashSet<VarId>) -> HostExpr {
+        match expr {
+            HostExpr::Len(v) if locals.contains(v) => self.canonical(expr.clone()),
+            HostExpr::Unary(op, e) => HostExpr::Unary(*op, Box::new(self.detached(e, locals))),
+            HostExpr::Binary(op, a, b) => HostExpr::Binary(
+                *op,
+                Box::new(self.detached(a, locals)),
+                Box::new(self.detached(b, locals)),
+            ),
+            HostExpr::Call(f, args) => {
+                HostExpr::Call(*f, args.iter().map(|a| self.detached(a, locals)).collect())
+            }
+            other => other.clone(),
+        }
+    }
+
     /// The number of elements an op runs over (its input side for sinks).
     fn index_space(&self, op: &Op) -> Option<HostExpr> {
         self.raw_index_space(op).map(|e| self.canonical(e))
@@ -322,10 +407,29 @@ impl StageFormer<'_> {
             _ => Vec::new(),
         };
         for e in op.host_exprs() {
-            e.visit_vars(&mut |v| needs_whole.push(v));
+            self.detached(e, &stage.locals)
+                .visit_vars(&mut |v| needs_whole.push(v));
         }
         if needs_whole.iter().any(|v| stage.locals.contains(v)) {
             return Err(Barrier::IndexedRead);
+        }
+        // A scatter's result is complete, and what it reads free to change, only
+        // once its stage has ended.
+        if op.array_reads().iter().any(|v| stage.scattered.contains(v))
+            || op
+                .outputs
+                .iter()
+                .any(|v| stage.scattered.contains(v) || stage.scatter_reads.contains(v))
+        {
+            return Err(Barrier::Scatter);
+        }
+        // An `out` placed after the stage must see the value it named.
+        if op
+            .outputs
+            .iter()
+            .any(|v| stage.output_vars().any(|o| o == *v))
+        {
+            return Err(Barrier::ControlFlow);
         }
         Ok(())
     }
@@ -447,6 +551,7 @@ impl StageFormer<'_> {
             barrier,
         })];
         nodes.extend(views);
+        nodes.extend(stage.outputs);
         nodes
     }
 }

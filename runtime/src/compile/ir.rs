@@ -157,6 +157,28 @@ pub struct Op {
     pub span: Span,
 }
 
+/// The host expressions of an op, shared or mutable: one list of where they are.
+macro_rules! op_host_exprs {
+    ($op:expr, $iter:ident, $($reference:tt)+) => {{
+        let mut exprs: Vec<$($reference)+ HostExpr> = $op.named.$iter().map(|(_, e)| e).collect();
+        match $($reference)+ $op.kind {
+            OpKind::Iota { count } => exprs.push(count),
+            OpKind::Fill { count, value } => {
+                exprs.push(count);
+                exprs.push(value);
+            }
+            OpKind::GroupGather { group } => exprs.push(group),
+            OpKind::Expand { fanout } => exprs.push(fanout),
+            OpKind::Scatter {
+                target: ScatterTarget::Len(len),
+                ..
+            } => exprs.push(len),
+            _ => {}
+        }
+        exprs
+    }};
+}
+
 impl Op {
     /// The primitive's name as written (`map`, `gather`, `scatter`, …).
     pub fn primitive(&self) -> &'static str {
@@ -206,22 +228,13 @@ impl Op {
 
     /// Every host expression the op evaluates.
     pub fn host_exprs(&self) -> Vec<&HostExpr> {
-        let mut exprs: Vec<&HostExpr> = self.named.iter().map(|(_, e)| e).collect();
-        match &self.kind {
-            OpKind::Iota { count } => exprs.push(count),
-            OpKind::Fill { count, value } => {
-                exprs.push(count);
-                exprs.push(value);
-            }
-            OpKind::GroupGather { group } => exprs.push(group),
-            OpKind::Expand { fanout } => exprs.push(fanout),
-            OpKind::Scatter {
-                target: ScatterTarget::Len(len),
-                ..
-            } => exprs.push(len),
-            _ => {}
-        }
-        exprs
+        op_host_exprs!(self, iter, &)
+    }
+
+    /// [`Op::host_exprs`], to rewrite them (fusion replaces `len(v)` of a value
+    /// its stage makes by `v`'s symbolic length).
+    pub fn host_exprs_mut(&mut self) -> Vec<&mut HostExpr> {
+        op_host_exprs!(self, iter_mut, &mut)
     }
 }
 

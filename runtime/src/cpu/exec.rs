@@ -4,6 +4,7 @@
 //! does not materialise live only as chunk-sized columns.
 
 use super::kernels::{self, Element, ScanTotal};
+use super::shared_scatter::{Claimed, Owners, ScatterClaims, SharedTarget};
 use crate::column::{Column, ColumnView};
 use crate::compile::ir::*;
 use crate::functor::{CallContext, FunctorLibrary};
@@ -97,11 +98,18 @@ struct ChunkResult {
     range: Range<usize>,
     /// One column per [`chunk_materialised`] variable.
     materialised: Vec<Arc<Column>>,
-    sink: SinkPart,
+    /// One part per sink of the stage, in stage order.
+    sinks: Vec<SinkPart>,
+    /// The chunk's claims, by claims group of [`DirectScatters`].
+    claims: Vec<Option<Claimed>>,
 }
 
 enum SinkPart {
-    None,
+    /// A plain scatter wrote its chunk into the shared target; where slots
+    /// of its claims' `aside` positions are owned by other chunks, its indices
+    /// and values are kept to write them after the stage.
+    Written(Option<(ChunkValue, ChunkValue)>),
+    /// A combining scatter: its chunk, to combine into the target in order.
     Scatter {
         indices: ChunkValue,
         values: ChunkValue,
@@ -113,6 +121,14 @@ enum SinkPart {
         flags: Option<ChunkValue>,
         total: ScanTotal,
     },
+}
+
+/// The targets of a stage's plain scatters, which its chunks write directly.
+struct DirectScatters {
+    /// By sink number: the claims group and the target of each plain scatter.
+    targets: Vec<Option<(usize, SharedTarget)>>,
+    /// Claims shared by the scatters with the same indices, mask and target length.
+    groups: Vec<ScatterClaims>,
 }
 
 /// One stage running on the CPU.
@@ -144,8 +160,9 @@ impl StageRun<'_, '_> {
             _ => self.context.chunk,
         };
 
+        let mut direct = self.direct_scatters(stage, host_values)?;
         let results = kernels::run_chunked(len, chunk, |range| {
-            self.run_chunk(stage, host_values, range)
+            self.run_chunk(stage, host_values, &direct, range)
         })
         .into_iter()
         .collect::<Result<Vec<_>, RunError>>()?;
@@ -171,38 +188,150 @@ impl StageRun<'_, '_> {
         for (var, column) in variables.into_iter().zip(joined) {
             self.slots.set_array(var, Arc::new(column));
         }
-        if let Some(op) = stage.ops.last().filter(|op| is_sink(op)) {
-            let sink_values = &host_values[stage.ops.len() - 1];
-            self.finish_sink(op, sink_values, results)?;
+        let sinks = stage
+            .ops
+            .iter()
+            .zip(host_values)
+            .filter(|(op, _)| is_sink(op));
+        for (number, (op, sink_values)) in sinks.enumerate() {
+            match direct.targets[number].take() {
+                Some((group, target)) => {
+                    self.finish_direct_scatter(op, target, group, &results, number)?
+                }
+                None => self.finish_sink(op, sink_values, &results, number)?,
+            }
         }
         Ok(())
     }
 
+    /// The targets of the stage's plain scatters, made before its chunks run.
+    fn direct_scatters(
+        &self,
+        stage: &Stage,
+        host_values: &[OpHostValues],
+    ) -> Result<DirectScatters, RunError> {
+        let mut direct = DirectScatters {
+            targets: Vec::new(),
+            groups: Vec::new(),
+        };
+        let mut group_keys = Vec::new();
+        let sinks = stage
+            .ops
+            .iter()
+            .zip(host_values)
+            .filter(|(op, _)| is_sink(op));
+        for (op, values) in sinks {
+            let OpKind::Scatter {
+                mask,
+                combine: None,
+                ..
+            } = &op.kind
+            else {
+                direct.targets.push(None);
+                continue;
+            };
+            let target = self.scatter_target(op, values)?;
+            let key = (op.inputs[0], *mask, target.len());
+            let group = match group_keys.iter().position(|k| *k == key) {
+                Some(group) => group,
+                None => {
+                    group_keys.push(key);
+                    direct.groups.push(ScatterClaims::new(target.len()));
+                    group_keys.len() - 1
+                }
+            };
+            direct
+                .targets
+                .push(Some((group, SharedTarget::new(target))));
+        }
+        Ok(direct)
+    }
+
+    /// What a scatter writes into: zeros, or a copy of its `into:` array.
+    fn scatter_target(&self, op: &Op, values: &OpHostValues) -> Result<Column, RunError> {
+        let OpKind::Scatter { target, .. } = &op.kind else {
+            unreachable!("a scatter")
+        };
+        Ok(match target {
+            ScatterTarget::Len(_) => Column::zeroed(
+                self.elem_type(op.outputs[0]),
+                values.scatter_len.unwrap_or_default(),
+                &self.context.library.records,
+            ),
+            ScatterTarget::Into(dst) => Arc::unwrap_or_clone(self.array(*dst)?.clone()),
+        })
+    }
+
+    /// A plain scatter's target, once the writes kept aside are applied in
+    /// chunk order where they come after the slot's owner.
+    fn finish_direct_scatter(
+        &mut self,
+        op: &Op,
+        target: SharedTarget,
+        group: usize,
+        results: &[ChunkResult],
+        number: usize,
+    ) -> Result<(), RunError> {
+        let mut dst = target.into_column();
+        fn kept_aside(result: &ChunkResult, number: usize) -> Option<&(ChunkValue, ChunkValue)> {
+            match &result.sinks[number] {
+                SinkPart::Written(kept) => kept.as_ref(),
+                _ => None,
+            }
+        }
+        if results
+            .iter()
+            .any(|result| kept_aside(result, number).is_some())
+        {
+            let claims = results
+                .iter()
+                .filter_map(|r| Some((r.range.start, r.claims[group].as_ref()?)));
+            let owners = Owners::new(dst.len(), claims);
+            for result in results {
+                let (Some((indices, values)), Some(claimed)) =
+                    (kept_aside(result, number), &result.claims[group])
+                else {
+                    continue;
+                };
+                let range = result.range.clone();
+                owners
+                    .apply_aside(
+                        range.start,
+                        claimed,
+                        indices.view(&range).as_u32(),
+                        &values.view(&range),
+                        &mut dst,
+                    )
+                    .map_err(|e| error(e.to_string()))?;
+            }
+        }
+        self.slots.set_array(op.outputs[0], Arc::new(dst));
+        Ok(())
+    }
+
+    /// Assembles the result of the stage's sink `number` (counted in stage
+    /// order) from every chunk's part: a combining scatter, a reduce or a scan.
     fn finish_sink(
         &mut self,
         op: &Op,
         values: &OpHostValues,
-        results: Vec<ChunkResult>,
+        results: &[ChunkResult],
+        number: usize,
     ) -> Result<(), RunError> {
         let records = &self.context.library.records;
         let kernel_error = |e: kernels::KernelError| error(e.to_string());
         match &op.kind {
             OpKind::Scatter {
-                target, combine, ..
+                combine: Some(combine),
+                ..
             } => {
-                let ty = self.elem_type(op.outputs[0]);
-                let mut dst = match target {
-                    ScatterTarget::Len(_) => {
-                        Column::zeroed(ty, values.scatter_len.unwrap_or_default(), records)
-                    }
-                    ScatterTarget::Into(dst) => Arc::unwrap_or_clone(self.array(*dst)?.clone()),
-                };
-                for result in &results {
+                let mut dst = self.scatter_target(op, values)?;
+                for result in results {
                     let SinkPart::Scatter {
                         indices,
                         values,
                         mask,
-                    } = &result.sink
+                    } = &result.sinks[number]
                     else {
                         unreachable!()
                     };
@@ -211,20 +340,15 @@ impl StageRun<'_, '_> {
                     let values = values.view(&range);
                     let mask = mask.as_ref().map(|m| m.view(&range));
                     let mask = mask.as_ref().map(|m| m.as_bool());
-                    match combine {
-                        Some(op) => {
-                            kernels::scatter_combine(*op, indices.as_u32(), &values, mask, &mut dst)
-                        }
-                        None => kernels::scatter(indices.as_u32(), &values, mask, &mut dst),
-                    }
-                    .map_err(kernel_error)?;
+                    kernels::scatter_combine(*combine, indices.as_u32(), &values, mask, &mut dst)
+                        .map_err(kernel_error)?;
                 }
                 self.slots.set_array(op.outputs[0], Arc::new(dst));
             }
             OpKind::Reduce { op: monoid } => {
                 let partials: Vec<Element> = results
                     .iter()
-                    .map(|r| match r.sink {
+                    .map(|r| match r.sinks[number] {
                         SinkPart::Reduce(e) => e,
                         _ => unreachable!(),
                     })
@@ -242,7 +366,7 @@ impl StageRun<'_, '_> {
                 let ty = self.elem_type(op.inputs[0]);
                 let totals: Vec<ScanTotal> = results
                     .iter()
-                    .map(|r| match &r.sink {
+                    .map(|r| match &r.sinks[number] {
                         SinkPart::Scan { total, .. } => *total,
                         _ => unreachable!(),
                     })
@@ -253,7 +377,7 @@ impl StageRun<'_, '_> {
                     .par_iter()
                     .zip(carries)
                     .map(|(result, carry)| {
-                        let SinkPart::Scan { values, flags, .. } = &result.sink else {
+                        let SinkPart::Scan { values, flags, .. } = &result.sinks[number] else {
                             unreachable!()
                         };
                         let range = result.range.clone();
@@ -271,7 +395,7 @@ impl StageRun<'_, '_> {
                 self.slots
                     .set_array(op.outputs[0], Arc::new(Column::concat(ty, &parts, records)));
             }
-            _ => unreachable!("only scatter, reduce and scan are sinks"),
+            _ => unreachable!("plain scatters finish in `finish_direct_scatter`"),
         }
         Ok(())
     }
@@ -281,6 +405,7 @@ impl StageRun<'_, '_> {
         &self,
         stage: &Stage,
         host_values: &[OpHostValues],
+        direct: &DirectScatters,
         range: Range<usize>,
     ) -> Result<ChunkResult, RunError> {
         let records = &self.context.library.records;
@@ -293,7 +418,9 @@ impl StageRun<'_, '_> {
                     None => Ok(ChunkValue::Whole(self.array(var)?.clone())),
                 }
             };
-        let mut sink = SinkPart::None;
+        let mut sinks = Vec::new();
+        // By claims group: this chunk's claims, made by the group's first scatter.
+        let mut claims: Vec<Option<Claimed>> = direct.groups.iter().map(|_| None).collect();
         for (op, values) in stage.ops.iter().zip(host_values) {
             let functor_context = |first_index: usize| CallContext {
                 named: &values.named,
@@ -375,17 +502,44 @@ impl StageRun<'_, '_> {
                     produced = outputs;
                 }
                 OpKind::Scatter { mask, .. } => {
-                    sink = SinkPart::Scatter {
+                    if let Some((group, target)) = &direct.targets[sinks.len()] {
+                        let indices = lookup(&locals, op.inputs[0])?;
+                        let values = lookup(&locals, op.inputs[1])?;
+                        let mask = mask.map(|m| lookup(&locals, m)).transpose()?;
+                        let index_view = indices.view(&range);
+                        let mask_view = mask.as_ref().map(|m| m.view(&range));
+                        let mask_view = mask_view.as_ref().map(|m| m.as_bool());
+                        let claimed = match &mut claims[*group] {
+                            Some(claimed) => claimed,
+                            slot => slot.insert(
+                                direct.groups[*group]
+                                    .claim(index_view.as_u32(), mask_view)
+                                    .map_err(|e| error(e.to_string()))?,
+                            ),
+                        };
+                        target
+                            .write(
+                                claimed,
+                                index_view.as_u32(),
+                                mask_view,
+                                &values.view(&range),
+                            )
+                            .map_err(|e| error(e.to_string()))?;
+                        let kept = claimed.kept_aside();
+                        sinks.push(SinkPart::Written(kept.then(|| (indices.clone(), values))));
+                        continue;
+                    }
+                    sinks.push(SinkPart::Scatter {
                         indices: lookup(&locals, op.inputs[0])?,
                         values: lookup(&locals, op.inputs[1])?,
                         mask: mask.map(|m| lookup(&locals, m)).transpose()?,
-                    };
+                    });
                 }
                 OpKind::Reduce { op: monoid } => {
                     let input = lookup(&locals, op.inputs[0])?;
                     let partial = kernels::reduce_partial(*monoid, &input.view(&range))
                         .map_err(|e| error(e.to_string()))?;
-                    sink = SinkPart::Reduce(partial);
+                    sinks.push(SinkPart::Reduce(partial));
                 }
                 OpKind::Scan {
                     op: monoid,
@@ -401,11 +555,11 @@ impl StageRun<'_, '_> {
                         flag_view.as_ref().map(|f| f.as_bool()),
                     )
                     .map_err(|e| error(e.to_string()))?;
-                    sink = SinkPart::Scan {
+                    sinks.push(SinkPart::Scan {
                         values: input,
                         flags,
                         total,
-                    };
+                    });
                 }
             }
             for (output, column) in op.outputs.iter().zip(produced) {
@@ -439,7 +593,8 @@ impl StageRun<'_, '_> {
         Ok(ChunkResult {
             range,
             materialised,
-            sink,
+            sinks,
+            claims,
         })
     }
 

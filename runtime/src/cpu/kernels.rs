@@ -265,7 +265,7 @@ pub(crate) fn check_length(
     }
 }
 
-fn check_same_type(expected: ElemType, found: ElemType) -> Result<(), KernelError> {
+pub(crate) fn check_same_type(expected: ElemType, found: ElemType) -> Result<(), KernelError> {
     if expected == found {
         Ok(())
     } else {
@@ -536,18 +536,19 @@ pub(crate) fn gather_by_position(
 }
 
 /// The argument checks shared by both scatters.
-fn check_scatter(
+pub(crate) fn check_scatter(
     indices: &[u32],
     src: &ColumnView<'_>,
     mask: Option<&[bool]>,
-    dst: &Column,
+    dst_type: ElemType,
+    dst_len: usize,
 ) -> Result<(), KernelError> {
     check_length("the scattered array", indices.len(), src.len())?;
     if let Some(mask) = mask {
         check_length("the scatter mask", indices.len(), mask.len())?;
     }
-    check_same_type(dst.elem_type(), src.elem_type())?;
-    check_indices(indices, mask, dst.len())
+    check_same_type(dst_type, src.elem_type())?;
+    check_indices(indices, mask, dst_len)
 }
 
 /// `dst[indices[i]] = write(dst[indices[i]], src[i])` for increasing `i` where
@@ -578,7 +579,7 @@ pub fn scatter(
     mask: Option<&[bool]>,
     dst: &mut Column,
 ) -> Result<(), KernelError> {
-    check_scatter(indices, src, mask, dst)?;
+    check_scatter(indices, src, mask, dst.elem_type(), dst.len())?;
     scatter_checked(indices, src, mask, dst)
 }
 
@@ -613,7 +614,7 @@ pub fn scatter_combine(
     mask: Option<&[bool]>,
     dst: &mut Column,
 ) -> Result<(), KernelError> {
-    check_scatter(indices, src, mask, dst)?;
+    check_scatter(indices, src, mask, dst.elem_type(), dst.len())?;
     with_element_type!(dst.elem_type(), primitive, T => {
         let monoid = Monoid::<T>::new(op)?;
         let (src, dst) = (typed_slice::<T>(src)?, typed_vec::<T>(dst)?);

@@ -1,2 +1,3 @@
 pub mod exec;
 pub mod kernels;
+mod shared_scatter;

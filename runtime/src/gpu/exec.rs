@@ -644,37 +644,46 @@ impl Backend for GpuBackend<'_> {
         let builder = self.builder();
         let kernel = build_stage_kernel(self, call, slots, builder, &mut encoder)?;
         let mut dispatches = vec![self.dispatch_of(kernel.builder, call.len)];
-        let sink_op = call.stage.ops.last().expect("a stage has ops");
-        let mut reduced = None;
-        match &kernel.sink {
-            SinkWork::None => {}
-            SinkWork::Scatter {
-                indices,
-                values,
-                mask,
-                winner,
-                target,
-            } => {
-                dispatches.push(self.scatter_write(indices, values, mask.as_ref(), winner, target));
-                slots.set_array(sink_op.outputs[0], target.clone());
-            }
-            SinkWork::Reduce { op, values } => {
-                reduced = Some((*op, self.reduce(*op, values, &mut dispatches)?));
-            }
-            SinkWork::Scan {
-                op,
-                exclusive,
-                values,
-                flags,
-            } => {
-                let out = self.scan(*op, !exclusive, values, flags.as_ref(), &mut dispatches)?;
-                slots.set_array(sink_op.outputs[0], out);
+        let mut reduced = Vec::new();
+        for (output, sink) in &kernel.sinks {
+            match sink {
+                SinkWork::Scatter {
+                    indices,
+                    values,
+                    mask,
+                    winner,
+                    target,
+                } => {
+                    dispatches.push(self.scatter_write(
+                        indices,
+                        values,
+                        mask.as_ref(),
+                        winner,
+                        target,
+                    ));
+                    slots.set_array(*output, target.clone());
+                }
+                SinkWork::Reduce { op, values } => {
+                    reduced.push((*output, *op, self.reduce(*op, values, &mut dispatches)?));
+                }
+                SinkWork::Scan {
+                    op,
+                    exclusive,
+                    values,
+                    flags,
+                } => {
+                    let out =
+                        self.scan(*op, !exclusive, values, flags.as_ref(), &mut dispatches)?;
+                    slots.set_array(*output, out);
+                }
             }
         }
         let time = self.submit(encoder, dispatches)?;
-        if let Some((op, result)) = reduced {
-            // The host needs the value now: wait, and check for failures first.
+        if !reduced.is_empty() {
+            // The host needs the values now: wait, and check for failures first.
             self.check_status()?;
+        }
+        for (output, op, result) in reduced {
             let value = if call.len == 0 {
                 crate::cpu::kernels::identity(op, result.ty)
                     .map_err(|e| error(e.to_string()))?
@@ -684,7 +693,7 @@ impl Backend for GpuBackend<'_> {
                     &download(self.gpu, &result, &self.library.records).map_err(|e| error(e.0))?,
                 )
             };
-            slots.set_host(sink_op.outputs[0], value);
+            slots.set_host(output, value);
         }
         if self.profile {
             self.check_status()?;

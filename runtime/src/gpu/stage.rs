@@ -1,9 +1,10 @@
 //! One stage as one compute shader: each op of the stage becomes WGSL
 //! statements in plan order, values live in locals, whole arrays are read
 //! through generated accessors, and what the stage materialises is stored at
-//! the end. A sink (scatter, reduce, scan) either completes in the kernel
-//! (combining scatter, through atomics) or leaves its inputs in arrays for
-//! the sink kernels that follow (see `exec.rs`).
+//! the end. Each sink (scatter, reduce, scan; a stage may end in several
+//! scatters) either completes in the kernel (combining scatter, through
+//! atomics) or leaves its inputs in arrays for the sink kernels that follow
+//! (see `exec.rs`).
 
 use super::array::{allocate_array, copy_array, GpuArray};
 use super::exec::GpuBackend;
@@ -26,9 +27,9 @@ enum Value {
     Whole(GpuArray),
 }
 
-/// What the stage kernel leaves for the sink kernels.
+/// What the stage kernel leaves for the sink kernels (a combining scatter
+/// leaves nothing: it completes in the stage kernel).
 pub enum SinkWork {
-    None,
     /// A plain scatter: `winner[t]` holds 1 + the last position writing slot `t`.
     Scatter {
         indices: GpuArray,
@@ -51,7 +52,8 @@ pub enum SinkWork {
 
 pub struct StageKernel<'r> {
     pub builder: ShaderBuilder<'r>,
-    pub sink: SinkWork,
+    /// One per sink of the stage, in stage order, with the sink's result.
+    pub sinks: Vec<(VarId, SinkWork)>,
 }
 
 /// Generates the stage's kernel; allocates (and records in `slots`) the
@@ -70,12 +72,12 @@ pub fn build_stage_kernel<'r>(
         locals: HashMap::new(),
         twins: Vec::new(),
     };
-    let sink = generator.ops(slots, encoder)?;
+    let sinks = generator.ops(slots, encoder)?;
     generator.materialise(slots)?;
     generator.emit_twins()?;
     Ok(StageKernel {
         builder: generator.builder,
-        sink,
+        sinks,
     })
 }
 
@@ -120,9 +122,9 @@ impl Generator<'_, '_, '_> {
         &mut self,
         slots: &mut Slots<GpuArray>,
         encoder: &mut wgpu::CommandEncoder,
-    ) -> Result<SinkWork, RunError> {
+    ) -> Result<Vec<(VarId, SinkWork)>, RunError> {
         let call = self.call;
-        let mut sink = SinkWork::None;
+        let mut sinks = Vec::new();
         for (position, (op, values)) in call.stage.ops.iter().zip(&call.host_values).enumerate() {
             match &op.kind {
                 OpKind::Iota { .. } => self.bind(op.outputs[0], "i".into()),
@@ -324,21 +326,28 @@ impl Generator<'_, '_, '_> {
                                 Some(m) => Some(self.keep(*m, slots)?),
                                 None => None,
                             };
-                            sink = SinkWork::Scatter {
-                                indices,
-                                values,
-                                mask,
-                                winner,
-                                target,
-                            };
+                            sinks.push((
+                                op.outputs[0],
+                                SinkWork::Scatter {
+                                    indices,
+                                    values,
+                                    mask,
+                                    winner,
+                                    target,
+                                },
+                            ));
                         }
                     }
                 }
                 OpKind::Reduce { op: monoid_op } => {
-                    sink = SinkWork::Reduce {
-                        op: *monoid_op,
-                        values: self.keep(op.inputs[0], slots)?,
-                    };
+                    let values = self.keep(op.inputs[0], slots)?;
+                    sinks.push((
+                        op.outputs[0],
+                        SinkWork::Reduce {
+                            op: *monoid_op,
+                            values,
+                        },
+                    ));
                 }
                 OpKind::Scan {
                     op: monoid_op,
@@ -350,16 +359,19 @@ impl Generator<'_, '_, '_> {
                         Some(f) => Some(self.keep(*f, slots)?),
                         None => None,
                     };
-                    sink = SinkWork::Scan {
-                        op: *monoid_op,
-                        exclusive: *exclusive,
-                        values,
-                        flags,
-                    };
+                    sinks.push((
+                        op.outputs[0],
+                        SinkWork::Scan {
+                            op: *monoid_op,
+                            exclusive: *exclusive,
+                            values,
+                            flags,
+                        },
+                    ));
                 }
             }
         }
-        Ok(sink)
+        Ok(sinks)
     }
 
     /// The op's named arguments as parameter words, in signature order.
