@@ -11,6 +11,8 @@ pub mod ply;
 mod random;
 pub mod scene;
 pub mod shading;
+#[cfg(test)]
+mod test_meshes;
 pub mod volume;
 
 pub use camera::{Camera, CameraSetup, StandardView};

@@ -1,6 +1,7 @@
 use super::*;
 use crate::builtin_scene::builtin_scene;
 use crate::random::SplitMix64;
+use crate::test_meshes::{box_outward, subdivided_cube, vertex_and_edge_targets};
 
 /// The watertight test applied to one file-order triangle, dispatched like `traverse`.
 fn intersect_one(ray: &Ray, vertices: [Vec3; 3]) -> Option<(f32, f32, f32)> {
@@ -792,69 +793,6 @@ fn isa_detection() {
     assert_eq!(available.last(), Some(&Isa::Portable));
 }
 
-/// A closed cube of `6 n²` unit squares on integer coordinates `0..=n` (shared
-/// vertices, outward winding), so that points on its edges are exact in f32.
-fn subdivided_cube(n: u32) -> TriangleMesh {
-    let mut index_of = std::collections::HashMap::new();
-    let mut positions = Vec::new();
-    let mut vertex = |p: [u32; 3]| {
-        *index_of.entry(p).or_insert_with(|| {
-            positions.push(Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32));
-            positions.len() as u32 - 1
-        })
-    };
-    let mut triangles = Vec::new();
-    for axis in 0..3 {
-        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-        for side in [0, n] {
-            for i in 0..n {
-                for j in 0..n {
-                    let mut corner = |di: u32, dj: u32| {
-                        let mut p = [0; 3];
-                        p[axis] = side;
-                        p[u] = i + di;
-                        p[v] = j + dj;
-                        vertex(p)
-                    };
-                    let [a, b, c, d] = [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)];
-                    if side == n {
-                        triangles.extend([[a, b, c], [a, c, d]]);
-                    } else {
-                        triangles.extend([[a, c, b], [a, d, c]]);
-                    }
-                }
-            }
-        }
-    }
-    TriangleMesh {
-        positions,
-        triangles,
-        normals: None,
-        scalars: None,
-    }
-}
-
-/// Targets on a mesh's vertices and edges: the vertices, and points a quarter,
-/// a third and half way along every edge.
-fn vertex_and_edge_targets(mesh: &TriangleMesh) -> Vec<Vec3> {
-    let mut targets = mesh.positions.clone();
-    let mut edges = std::collections::HashSet::new();
-    for &[a, b, c] in &mesh.triangles {
-        for (p, q) in [(a, b), (b, c), (c, a)] {
-            edges.insert((p.min(q), p.max(q)));
-        }
-    }
-    let mut edges: Vec<_> = edges.into_iter().collect();
-    edges.sort_unstable();
-    for (p, q) in edges {
-        let (p, q) = (mesh.positions[p as usize], mesh.positions[q as usize]);
-        for s in [0.25, 1.0 / 3.0, 0.5] {
-            targets.push(p + s * (q - p));
-        }
-    }
-    targets
-}
-
 /// Watertightness through the fast paths: a million rays from outside two closed
 /// meshes, aimed exactly at vertices and edges (close enough to the outward
 /// direction that none only grazes a convex corner), must all hit the surface no
@@ -878,28 +816,12 @@ fn a_million_rays_at_vertices_and_edges_never_leak() {
         let mut outside = Vec::with_capacity(targets.len() * rays_per_target);
         let mut inside = Vec::with_capacity(targets.len());
         for &target in &targets {
-            // For the cube, "outward" is the face normal; at its edges and corners,
-            // the sum of the faces' normals.
             // The sphere's outward direction; the cube's face normal (at its edges
             // and corners, the sum of the faces' normals).
             let outward = if is_sphere {
                 target.normalize()
             } else {
-                let side = |x: f32, low: f32, high: f32| {
-                    if x == low {
-                        -1.0
-                    } else if x == high {
-                        1.0
-                    } else {
-                        0.0
-                    }
-                };
-                Vec3::new(
-                    side(target.x, bounds.min.x, bounds.max.x),
-                    side(target.y, bounds.min.y, bounds.max.y),
-                    side(target.z, bounds.min.z, bounds.max.z),
-                )
-                .normalize()
+                box_outward(target, &bounds)
             };
             for _ in 0..rays_per_target {
                 let tilt = max_tilt * random_point(&mut random, -1.0, 1.0).normalize();

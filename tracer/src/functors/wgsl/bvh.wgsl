@@ -95,9 +95,15 @@ fn tracer_bvh_entry_distance(ray: TracerBvhRay, box_min: vec3<f32>, box_max: vec
     return tracer_infinity();
 }
 
-// `px * qy - py * qx` with a correct sign, for the CPU's double-precision
-// re-evaluation of a zero edge function (WGSL has no f64): Kahan's
-// difference of products, exact products through `fma`, within 1.5 ulps.
+// `px * qy - py * qx` with the exact sign (exactly 0 when the products are
+// equal): Kahan's difference of products, exact products through `fma`,
+// within 1.5 ulps. The CPU gets the same signs from its f32 difference (the
+// difference of rounded products has the exact sign or is 0) and its f64
+// re-evaluation of zeros. WGSL has no f64, and a GPU compiler may contract
+// the plain `a * b - c * d` into an `fma` (NVIDIA's does), whose result is
+// neither sign-exact nor the negation of the same edge's in the neighbouring
+// triangle: rays through shared edges and vertices then leak (seen on an
+// H100: 64 of 8648 rays aimed at a closed cube's vertices and edges).
 fn tracer_bvh_edge_exact(px: f32, py: f32, qx: f32, qy: f32) -> f32 {
     let rounded = py * qx;
     let rounding_error = fma(-py, qx, rounded);
@@ -116,6 +122,8 @@ fn tracer_bvh_intersect_triangle(ray: TracerBvhRay, index: u32, tmax: f32) -> Tr
     let p0 = v0 - ray.origin;
     let p1 = v1 - ray.origin;
     let p2 = v2 - ray.origin;
+    // (A vertex's sheared coordinates are the same in every triangle that
+    // shares it, contracted or not: the same operations on the same values.)
     let ax = p0[ray.kx] - ray.shear.x * p0[ray.kz];
     let ay = p0[ray.ky] - ray.shear.y * p0[ray.kz];
     let az = ray.shear.z * p0[ray.kz];
@@ -126,14 +134,9 @@ fn tracer_bvh_intersect_triangle(ray: TracerBvhRay, index: u32, tmax: f32) -> Tr
     let cy = p2[ray.ky] - ray.shear.y * p2[ray.kz];
     let cz = ray.shear.z * p2[ray.kz];
 
-    var u = cx * by - cy * bx;
-    var v = ax * cy - ay * cx;
-    var w = bx * ay - by * ax;
-    if (u == 0.0 || v == 0.0 || w == 0.0) {
-        u = tracer_bvh_edge_exact(cx, cy, bx, by);
-        v = tracer_bvh_edge_exact(ax, ay, cx, cy);
-        w = tracer_bvh_edge_exact(bx, by, ax, ay);
-    }
+    let u = tracer_bvh_edge_exact(cx, cy, bx, by);
+    let v = tracer_bvh_edge_exact(ax, ay, cx, cy);
+    let w = tracer_bvh_edge_exact(bx, by, ax, ay);
     if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) {
         return miss;
     }
