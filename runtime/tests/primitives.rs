@@ -411,3 +411,24 @@ fn many_workgroups_use_a_two_dimensional_dispatch() {
         .current();
     check_against_reference(&case, &run_gpu(&case, true, &narrow));
 }
+
+/// A run reuses the device buffers of the runs before it (new device memory
+/// is slow to get), which still hold those runs' values: where a new buffer
+/// would be zero (a combining scatter's target, a fan-out's or a scan's
+/// partial results), the reused one must be cleared first.
+#[test]
+fn runs_that_reuse_buffers_still_start_from_zero() {
+    let Some(gpu) = common::gpu() else { return };
+    // A context with its own, empty pool, so that the runs below reuse each
+    // other's buffers.
+    let own_pool = gpu.with_limits(gpu.limits);
+    let mut runner = proptest::test_runner::TestRunner::deterministic();
+    let case = case_of_size(Just(4099))
+        .new_tree(&mut runner)
+        .unwrap()
+        .current();
+    for _ in 0..3 {
+        check_against_reference(&case, &run_gpu(&case, true, &own_pool));
+        check_against_reference(&case, &run_gpu(&case, false, &own_pool));
+    }
+}

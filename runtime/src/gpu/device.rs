@@ -31,6 +31,8 @@ pub struct GpuContext {
     pub(crate) pipelines: super::exec::PipelineCache,
     /// Scene buffers by name and data, uploaded once.
     pub(crate) scene_buffers: super::exec::SceneBufferCache,
+    /// Buffers of dropped arrays, for the next arrays of the same size.
+    pub(crate) buffer_pool: std::sync::Arc<super::array::BufferPool>,
 }
 
 impl fmt::Debug for GpuContext {
@@ -90,6 +92,7 @@ impl GpuContext {
             timestamps,
             pipelines: Default::default(),
             scene_buffers: Default::default(),
+            buffer_pool: Default::default(),
         })
     }
 
@@ -117,6 +120,7 @@ impl GpuContext {
             timestamps: self.timestamps,
             pipelines: Default::default(),
             scene_buffers: Default::default(),
+            buffer_pool: Default::default(),
         }
     }
 }

@@ -4,7 +4,7 @@
 //! only where it must read: a `reduce` result the plan's control flow uses,
 //! the outputs, and (when profiling) the end of every stage.
 
-use super::array::{allocate_array, download, download_words, wait, GpuArray};
+use super::array::{allocate_array, download, download_words, wait, GpuArray, RunBuffers};
 use super::device::{GpuContext, GpuError};
 use super::monoid;
 use super::shader::{Access, Binding, ShaderBuilder, WORKGROUP};
@@ -77,6 +77,7 @@ pub(crate) fn run_plan_gpu_with_inputs(
         uniforms,
         status,
         failures: Mutex::new(Vec::new()),
+        buffers: RunBuffers::new(gpu),
     };
     let result = interpret_with_inputs(plan, &mut backend, context.uniforms, records, inputs)?;
     backend.check_status()?;
@@ -158,6 +159,8 @@ pub struct GpuBackend<'a> {
     /// Failure messages; code `n` is entry `n - 1`. `{a}`, `{b}` are filled
     /// from the status words.
     failures: Mutex<Vec<String>>,
+    /// Where the run's arrays leave their buffers for later runs.
+    pub(crate) buffers: Arc<RunBuffers>,
 }
 
 /// A kernel ready to dispatch over `threads` invocations.
@@ -459,8 +462,8 @@ impl GpuBackend<'_> {
         let mut level = values.clone();
         loop {
             let blocks = level.len.div_ceil(BLOCK).max(1);
-            let out =
-                allocate_array(self.gpu, level.ty, blocks, records).map_err(|e| error(e.0))?;
+            let out = allocate_array(self.gpu, level.ty, blocks, records, &self.buffers)
+                .map_err(|e| error(e.0))?;
             let mut builder = self.builder();
             let combine =
                 monoid::combine_function(op, level.ty, &mut builder.functions).map_err(error)?;
@@ -495,15 +498,17 @@ impl GpuBackend<'_> {
         let records = &self.library.records;
         let gpu_error = |e: GpuError| error(e.0);
         let n = values.len;
-        let out = allocate_array(self.gpu, values.ty, n, records).map_err(gpu_error)?;
+        let out =
+            allocate_array(self.gpu, values.ty, n, records, &self.buffers).map_err(gpu_error)?;
         if n == 0 {
             return Ok(out);
         }
         let blocks = n.div_ceil(BLOCK);
         // Pass 1: each block's (value since its last segment start, started) pair.
-        let totals = allocate_array(self.gpu, values.ty, blocks, records).map_err(gpu_error)?;
-        let starts =
-            allocate_array(self.gpu, ElemType::Bool, blocks, records).map_err(gpu_error)?;
+        let totals = allocate_array(self.gpu, values.ty, blocks, records, &self.buffers)
+            .map_err(gpu_error)?;
+        let starts = allocate_array(self.gpu, ElemType::Bool, blocks, records, &self.buffers)
+            .map_err(gpu_error)?;
         let identity = monoid::identity(op, values.ty).map_err(error)?;
         {
             let (mut builder, combine, load, flag) = self.scan_builder(op, values, flags)?;
@@ -615,6 +620,7 @@ fn read_buffer_words(
         len: words,
         segment: words,
         buffers: vec![buffer.clone()],
+        pool: None,
     };
     download_words(gpu, &field)
 }

@@ -240,12 +240,16 @@ impl Generator<'_, '_, '_> {
                             ty,
                             values.scatter_len.unwrap_or_default(),
                             call.records,
+                            &self.backend.buffers,
                         )
                         .map_err(Self::gpu_error)?,
-                        ScatterTarget::Into(dst) => {
-                            copy_array(self.backend.gpu, encoder, slots.array(call.plan, *dst)?)
-                                .map_err(Self::gpu_error)?
-                        }
+                        ScatterTarget::Into(dst) => copy_array(
+                            self.backend.gpu,
+                            encoder,
+                            slots.array(call.plan, *dst)?,
+                            &self.backend.buffers,
+                        )
+                        .map_err(Self::gpu_error)?,
                     };
                     let index = self.lookup(slots, op.inputs[0])?;
                     let index = self.expression(&index);
@@ -306,6 +310,7 @@ impl Generator<'_, '_, '_> {
                                 ElemType::U32,
                                 target.len,
                                 call.records,
+                                &self.backend.buffers,
                             )
                             .map_err(Self::gpu_error)?;
                             let field = self.builder.field(&winner.fields[0], Access::Atomic);
@@ -417,6 +422,7 @@ impl Generator<'_, '_, '_> {
             self.call.elem_type(var),
             self.call.len,
             self.call.records,
+            &self.backend.buffers,
         )
         .map_err(Self::gpu_error)?;
         let store = self.builder.array_store(&array, "i", name);
