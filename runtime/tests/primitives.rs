@@ -432,3 +432,35 @@ fn runs_that_reuse_buffers_still_start_from_zero() {
         check_against_reference(&case, &run_gpu(&case, false, &own_pool));
     }
 }
+
+/// Arrays come back from the device in read-back pieces of a few MiB (see
+/// `READ_BACK_PIECE_BYTES`): a record array of 12-byte fields longer than a
+/// piece, split into binding segments that are not multiples of the piece,
+/// reads back element for element.
+#[test]
+fn large_arrays_read_back_across_pieces_and_segments() {
+    use dpp_runtime::gpu::array::{download, upload};
+    let Some(gpu) = common::gpu() else { return };
+    let segmented = gpu.with_limits(GpuLimits {
+        max_binding_bytes: 3_000_000,
+        ..gpu.limits
+    });
+    let n = 1_000_003;
+    let vectors = Column::Vec3(
+        (0..n)
+            .map(|i| glam::Vec3::new(i as f32, -(i as f32), 0.5 * i as f32))
+            .collect(),
+    );
+    let flags = Column::Bool((0..n).map(|i| i % 3 == 0).collect());
+    for column in [vectors, flags] {
+        for context in [gpu, &segmented] {
+            let on_device = upload(context, &column).unwrap();
+            let back = download(context, &on_device, &Default::default()).unwrap();
+            assert!(
+                back == column,
+                "{:?} read back differently",
+                column.elem_type()
+            );
+        }
+    }
+}
