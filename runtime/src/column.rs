@@ -31,6 +31,21 @@ pub enum Scalar {
     Float(f32),
 }
 
+/// How many representable floats apart `a` and `b` are (`±0` are one value):
+/// how the backends' agreement tests measure float differences.
+pub fn ulp_distance(a: f32, b: f32) -> u64 {
+    let ordered = |x: f32| {
+        let bits = x.to_bits();
+        let magnitude = i64::from(bits & 0x7fff_ffff);
+        if bits >> 31 == 1 {
+            -magnitude
+        } else {
+            magnitude
+        }
+    };
+    ordered(a).abs_diff(ordered(b))
+}
+
 /// A borrowed slice of an array: what a functor's CPU implementation receives.
 #[derive(Clone, Debug)]
 pub enum ColumnView<'a> {

@@ -8,7 +8,7 @@
 mod common;
 
 use common::Data;
-use dpp_runtime::column::Scalar as Cell;
+use dpp_runtime::column::{ulp_distance, Scalar as Cell};
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
 use dpp_runtime::cpu::kernels::DEFAULT_CHUNK;
 use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
@@ -711,20 +711,6 @@ fn cells_text(cells: &[Cell]) -> String {
     }
 }
 
-/// The distance in representable floats; `±0` are one value.
-fn ulps(a: f32, b: f32) -> u64 {
-    let ordered = |x: f32| {
-        let bits = x.to_bits();
-        let magnitude = i64::from(bits & 0x7fff_ffff);
-        if bits >> 31 == 1 {
-            -magnitude
-        } else {
-            magnitude
-        }
-    };
-    ordered(a).abs_diff(ordered(b))
-}
-
 fn floats_agree(cpu: f32, gpu: f32, tolerance: Tolerance) -> bool {
     if cpu.to_bits() == gpu.to_bits() {
         return true;
@@ -744,7 +730,7 @@ fn floats_agree(cpu: f32, gpu: f32, tolerance: Tolerance) -> bool {
     }
     match tolerance {
         ZeroSign => cpu == 0.0 && gpu == 0.0,
-        Ulp(n) => ulps(cpu, gpu) <= u64::from(n),
+        Ulp(n) => ulp_distance(cpu, gpu) <= u64::from(n),
         _ => false,
     }
 }

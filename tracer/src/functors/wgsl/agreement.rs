@@ -16,7 +16,7 @@ use crate::functors::{RayRecord, RayWriter, SurfaceRecord, SurfaceWriter};
 use crate::scene::TraceScene;
 use crate::shading::{Material, MeshMaterials, PointLight};
 use crate::volume::Volume;
-use dpp_runtime::column::Scalar as Cell;
+use dpp_runtime::column::{ulp_distance, Scalar as Cell};
 use dpp_runtime::gpu::{gpu_for_tests, run_functor_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{
     CallContext, Column, ElemType, FunctorError, FunctorLibrary, HostValue, RecordRegistry,
@@ -135,20 +135,6 @@ fn floats_agree(cpu: f32, gpu: f32, tol: Tol) -> bool {
         return false;
     }
     (cpu - gpu).abs() <= tol.abs.max(tol.rel * cpu.abs().max(gpu.abs()))
-}
-
-/// The distance in representable floats; `±0` are one value.
-fn ulp_distance(a: f32, b: f32) -> u64 {
-    let ordered = |x: f32| {
-        let bits = x.to_bits();
-        let magnitude = i64::from(bits & 0x7fff_ffff);
-        if bits >> 31 == 1 {
-            -magnitude
-        } else {
-            magnitude
-        }
-    };
-    ordered(a).abs_diff(ordered(b))
 }
 
 // ---------------------------------------------------------------------------
