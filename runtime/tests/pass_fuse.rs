@@ -423,6 +423,67 @@ fn rule4_fan_out_and_group_gather_change_the_length() {
 }
 
 #[test]
+fn a_gather_of_groups_of_one_changes_no_length_and_fuses_like_a_map() {
+    // `group: 1` written as a literal: each element reads only its own source
+    // element, after a map and before a scatter of the same stage, even reading
+    // a value that a scatter of the stage also reads. A group size that is 1
+    // only at run time still ends the stage.
+    check!(
+        r#"
+        param n = 4
+        param one = 1
+        pipeline p {
+            x = iota(n) → map<toF32>
+            y = map<mul>(x, x)
+            back = map<sub>(fill(n, 3), iota(n))
+            first = scatter(back, y, len: n)
+            g = gather<sum>(y, group: 1)
+            out s = scatter(back, map<add>(g, x), len: n)
+            out first = first
+            out h = gather<sum>(y, group: one)
+        }
+        "#,
+        @"
+    pipeline p (fused, 2 stages)
+    param n: int = 4
+    param one: int = 1
+    let n: int = 4
+    let one: int = 1
+    stage 1 [iota → map<toF32> → map<mul> → fill → map<sub> → scatter → gather<sum> → map<add> → scatter] {
+      over n
+      %2 = iota(n)
+      x = map<toF32>(%2)
+      y = map<mul>(x, x)
+      %7 = fill(n, 3)
+      back = map<sub>(%7, %2)
+      first = scatter(back, y, len: n)
+      g = gather<sum>(y, group: 1)
+      %15 = map<add>(g, x)
+      s = scatter(back, %15, len: n)
+      reads direct: -; indexed: -; uniform: n
+      materialises y: f32, first: f32, s: f32
+      ends at control flow
+    }
+    out s = s
+    let first#1 = first
+    out first = first#1
+    stage 2 [gather<sum>] {
+      over n / one
+      h = gather<sum>(y, group: one)
+      reads direct: -; indexed: y: f32; uniform: one
+      materialises h: f32
+      ends at control flow
+    }
+    out h = h
+    ---
+    s = [12.0, 6.0, 2.0, 0.0]
+    first = [9.0, 4.0, 1.0, 0.0]
+    h = [0.0, 1.0, 4.0, 9.0]
+    "
+    );
+}
+
+#[test]
 fn rule4_compaction_changes_the_length() {
     check!(
         r#"

@@ -14,6 +14,7 @@
 
 use super::ir::*;
 use super::typecheck::node_writes;
+use crate::host::HostValue;
 use dpp_dsl::ast::BinaryOp;
 use std::collections::HashSet;
 
@@ -331,6 +332,12 @@ impl StageFormer<'_> {
                 _ => HostExpr::Len(v),
             },
             HostExpr::Unary(op, e) => HostExpr::Unary(op, Box::new(self.canonical(*e))),
+            // `n / 1` and `n * 1`, the lengths of groups and fan-outs of one, are `n`.
+            HostExpr::Binary(BinaryOp::Div | BinaryOp::Mul, a, b)
+                if *b == HostExpr::Const(HostValue::Int(1)) =>
+            {
+                self.canonical(*a)
+            }
             HostExpr::Binary(op, a, b) => HostExpr::Binary(
                 op,
                 Box::new(self.canonical(*a)),
@@ -372,6 +379,7 @@ impl StageFormer<'_> {
         let input = || Some(HostExpr::Len(*op.inputs.first()?));
         match &op.kind {
             OpKind::Iota { count } | OpKind::Fill { count, .. } => Some(count.clone()),
+            _ if is_elementwise_group(op) => input(),
             OpKind::GroupGather { group } => Some(HostExpr::Binary(
                 BinaryOp::Div,
                 Box::new(input()?),
@@ -391,7 +399,9 @@ impl StageFormer<'_> {
         if !self.fuse {
             return Err(Barrier::Unfused);
         }
-        if matches!(op.kind, OpKind::GroupGather { .. } | OpKind::Expand { .. }) {
+        if matches!(op.kind, OpKind::GroupGather { .. } | OpKind::Expand { .. })
+            && !is_elementwise_group(op)
+        {
             return Err(Barrier::LengthChange);
         }
         if self.index_space(op) != stage.index_space || stage.index_space.is_none() {
@@ -479,6 +489,7 @@ impl StageFormer<'_> {
         for op in &stage.ops {
             let (direct, indexed): (Vec<VarId>, Vec<VarId>) = match &op.kind {
                 OpKind::Gather => (vec![op.inputs[0]], vec![op.inputs[1]]),
+                _ if is_elementwise_group(op) => (op.inputs.clone(), Vec::new()),
                 OpKind::GroupGather { .. } | OpKind::Expand { .. } => {
                     (Vec::new(), op.inputs.clone())
                 }
@@ -574,4 +585,16 @@ fn collect_uniforms(expr: &HostExpr, vars: &[VarInfo], out: &mut Vec<String>) {
         }
         HostExpr::Call(_, args) => args.iter().for_each(|a| collect_uniforms(a, vars, out)),
     }
+}
+
+/// A group gather of groups of one (`gather<f>(a, group: 1)`, the group a
+/// literal): element `i` reads only `a[i]`, so it runs over `a`'s index space
+/// like a map and fuses like one (spec §5: it changes no length).
+pub(crate) fn is_elementwise_group(op: &Op) -> bool {
+    matches!(
+        &op.kind,
+        OpKind::GroupGather {
+            group: HostExpr::Const(HostValue::Int(1))
+        }
+    )
 }

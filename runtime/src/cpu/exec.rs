@@ -489,13 +489,16 @@ impl StageRun<'_, '_> {
                         OpKind::GroupGather { .. } => range.start * k..range.end * k,
                         _ => range.start / k..range.end / k,
                     };
-                    let src = self.array(op.inputs[0])?;
+                    // Only a gather of groups of one runs after other ops of its
+                    // stage (`fuse::is_elementwise_group`): its input may be the
+                    // chunk's own values, element for element.
+                    let src = lookup(&locals, op.inputs[0])?;
                     let functor = self.functor(op)?;
                     let mut outputs = new_outputs(range.len());
                     functor
                         .run_cpu(
                             &functor_context(source_range.start),
-                            &[src.slice(source_range)],
+                            &[src.view(&source_range)],
                             &mut outputs,
                         )
                         .map_err(|e| error(e.0))?;

@@ -191,13 +191,26 @@ impl Generator<'_, '_, '_> {
                 }
                 OpKind::GroupGather { .. } => {
                     let (function, _) = self.twin(position, op, slots)?;
-                    let source = slots.array(call.plan, op.inputs[0])?.clone();
-                    let loader = self.builder.array_loader(&source);
-                    let ty = elem_type_wgsl(source.ty, call.records);
-                    let _ = writeln!(
-                        self.builder.functions,
-                        "fn {function}_src(i: u32) -> {ty} {{ return {loader}(i); }}"
-                    );
+                    let ty = elem_type_wgsl(call.elem_type(op.inputs[0]), call.records);
+                    match self.lookup(slots, op.inputs[0])? {
+                        Value::Whole(source) => {
+                            let loader = self.builder.array_loader(&source);
+                            let _ = writeln!(
+                                self.builder.functions,
+                                "fn {function}_src(i: u32) -> {ty} {{ return {loader}(i); }}"
+                            );
+                        }
+                        // A gather of groups of one after other ops of its stage
+                        // (`fuse::is_elementwise_group`) reads the element's own
+                        // value, which the twin's reader finds in a private variable.
+                        Value::Local(value) => {
+                            let _ = writeln!(
+                                self.builder.functions,
+                                "var<private> {function}_value: {ty};\nfn {function}_src(i: u32) -> {ty} {{ return {function}_value; }}"
+                            );
+                            let _ = writeln!(self.builder.body, "    {function}_value = {value};");
+                        }
+                    }
                     let k = self.builder.param_u32(values.group as u32);
                     let mut arguments = vec![format!("i * {k}"), k];
                     self.named_arguments(op, values, &mut arguments)?;
