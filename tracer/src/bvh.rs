@@ -294,7 +294,7 @@ impl Bvh {
     ) -> Option<(usize, f32, f32, f32)> {
         let prepared = PreparedRay::new::<KX, KY, KZ>(ray);
         let mut closest = ray.tmax;
-        let mut best = None;
+        let mut best: Option<(usize, f32, f32, f32)> = None;
         let mut stack = [(0u32, 0f32); MAX_STACK_DEPTH];
         let mut stack_len = 0;
         let mut node = 0usize;
@@ -321,9 +321,14 @@ impl Bvh {
                 }
                 let first = child.index as usize;
                 for index in first..first + child.count as usize {
-                    if let Some((t, u, v)) =
-                        prepared.intersect_triangle::<KX, KY, KZ>(&self.triangles[index], closest)
-                    {
+                    // A hit at exactly `closest` wins if its leaf-order index is
+                    // lower: the answer then depends on no order of visits.
+                    let wins_ties = best.is_some_and(|(best_index, ..)| index < best_index);
+                    if let Some((t, u, v)) = prepared.intersect_triangle::<KX, KY, KZ>(
+                        &self.triangles[index],
+                        closest,
+                        wins_ties,
+                    ) {
                         best = Some((index, t, u, v));
                         if ANY_HIT {
                             return best;
@@ -432,12 +437,14 @@ impl PreparedRay {
     /// Watertight ray–triangle intersection (Woop, Benthin, Wald 2013, two-sided):
     /// vertices are sheared into ray space so that edge functions of a shared edge
     /// are computed from the same numbers by both triangles, and exact zeros are
-    /// re-evaluated in double precision. Returns `(t, u, v)` for `0 < t < tmax`.
+    /// re-evaluated in double precision. Returns `(t, u, v)` for `0 < t < tmax`,
+    /// or `0 < t <= tmax` with `up_to_tmax` (a hit that ties with the best one).
     #[inline(always)]
     fn intersect_triangle<const KX: usize, const KY: usize, const KZ: usize>(
         &self,
         triangle: &BvhTriangle,
         tmax: f32,
+        up_to_tmax: bool,
     ) -> Option<(f32, f32, f32)> {
         let [sx, sy, sz] = self.shear;
         let relative = |v: &[f32; 3]| {
@@ -471,7 +478,7 @@ impl PreparedRay {
             return None;
         }
         let t = (u * az + v * bz + w * cz) / determinant;
-        if t > 0.0 && t < tmax {
+        if t > 0.0 && (t < tmax || (up_to_tmax && t == tmax)) {
             Some((t, v / determinant, w / determinant))
         } else {
             None

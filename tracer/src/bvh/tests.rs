@@ -9,11 +9,11 @@ fn intersect_one(ray: &Ray, vertices: [Vec3; 3]) -> Option<(f32, f32, f32)> {
     let triangle = BvhTriangle { v0, v1, v2 };
     let d = ray.direction.abs();
     if d.x >= d.y && d.x >= d.z {
-        PreparedRay::new::<1, 2, 0>(ray).intersect_triangle::<1, 2, 0>(&triangle, ray.tmax)
+        PreparedRay::new::<1, 2, 0>(ray).intersect_triangle::<1, 2, 0>(&triangle, ray.tmax, false)
     } else if d.y >= d.z {
-        PreparedRay::new::<2, 0, 1>(ray).intersect_triangle::<2, 0, 1>(&triangle, ray.tmax)
+        PreparedRay::new::<2, 0, 1>(ray).intersect_triangle::<2, 0, 1>(&triangle, ray.tmax, false)
     } else {
-        PreparedRay::new::<0, 1, 2>(ray).intersect_triangle::<0, 1, 2>(&triangle, ray.tmax)
+        PreparedRay::new::<0, 1, 2>(ray).intersect_triangle::<0, 1, 2>(&triangle, ray.tmax, false)
     }
 }
 
@@ -582,10 +582,26 @@ fn wide_traversal_matches_binary_on_random_rays() {
     }
 }
 
+/// The closest hit by testing every triangle: of those hit at the least distance,
+/// the one with the lowest leaf-order index.
+fn lowest_leaf_order_hit(bvh: &Bvh, ray: &Ray) -> Option<u32> {
+    let mut best: Option<(f32, usize)> = None;
+    for (index, triangle) in bvh.triangles().iter().enumerate() {
+        let vertices = [triangle.v0, triangle.v1, triangle.v2].map(Vec3::from);
+        if let Some((t, _, _)) = intersect_one(ray, vertices) {
+            if best.is_none_or(|(closest, _)| t < closest) {
+                best = Some((t, index));
+            }
+        }
+    }
+    best.map(|(_, index)| bvh.triangle_ids()[index])
+}
+
 /// Rays through the grid's vertices and edges hit two to six coplanar triangles at
-/// the same distance: ties between leaves are decided as the binary traversal does.
+/// the same distance: every traversal gives the one with the lowest leaf-order
+/// index, whatever order it visits them in.
 #[test]
-fn exact_ties_resolve_like_the_binary_traversal() {
+fn exact_ties_go_to_the_lowest_leaf_order_triangle() {
     let mesh = grid(64);
     let bvh = Bvh::build(&mesh).unwrap();
     let mut random = SplitMix64::new(8);
@@ -603,7 +619,13 @@ fn exact_ties_resolve_like_the_binary_traversal() {
             tmax: f32::INFINITY,
         };
         check_against_binary(&bvh, &ray);
-        if let Some(hit) = bvh.intersect_closest(&ray) {
+        let hit = bvh.intersect_closest(&ray);
+        assert_eq!(
+            hit.map(|h| h.prim),
+            lowest_leaf_order_hit(&bvh, &ray),
+            "{ray:?}"
+        );
+        if let Some(hit) = hit {
             distinct.insert(hit.prim);
         }
     }
@@ -763,9 +785,10 @@ fn packets_of_camera_rays_match_binary() {
 }
 
 /// Packets of rays from one point through the grid's vertices and edges: exact
-/// ties between coplanar triangles, decided as the binary traversal does.
+/// ties between coplanar triangles go to the lowest leaf-order triangle, as in
+/// every traversal.
 #[test]
-fn packets_resolve_exact_ties_like_the_binary_traversal() {
+fn packets_resolve_exact_ties_like_every_traversal() {
     let mesh = grid(64);
     let bvh = Bvh::build(&mesh).unwrap();
     let mut rays = Vec::new();
@@ -784,6 +807,10 @@ fn packets_resolve_exact_ties_like_the_binary_traversal() {
         }
     }
     check_batch_against_binary(&bvh, &rays);
+    for ray in rays.iter().step_by(7) {
+        let hit = bvh.intersect_closest(ray).map(|h| h.prim);
+        assert_eq!(hit, lowest_leaf_order_hit(&bvh, ray), "{ray:?}");
+    }
 }
 
 #[test]

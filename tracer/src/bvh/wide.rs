@@ -11,11 +11,10 @@
 //!
 //! Exactness: every box and triangle test does the scalar code's IEEE operations
 //! in the same order ([`super::simd`]), so distances, culling and hits are bit for
-//! bit those of the binary traversal. Only the order of visits differs, which can
-//! change the answer in one case: two triangles hit at exactly the same `t` (a ray
-//! through a shared edge or vertex). When such a tie survives to the end, the ray
-//! is traced again by the binary traversal, whose visit order decides as before
-//! (none of the 2M primary rays of a 1080p frame of the built-in scene).
+//! bit those of the binary traversal. Only the order of visits differs, which
+//! decides nothing: of triangles hit at exactly the same `t` (a ray through a
+//! shared edge or vertex, or overlapping copies of a surface, as CAD meshes have)
+//! every traversal keeps the one with the lowest leaf-order index.
 
 use super::simd::{Lanes, Lanes8, LanesExt, Portable};
 use super::{Bvh, BvhChild, BvhNode, BvhTriangle, PreparedRay, Ray, ROBUST_FAR_SCALE};
@@ -473,14 +472,12 @@ fn traverse<
         closest: ray.tmax,
         u: 0.0,
         v: 0.0,
-        tied: false,
     };
     let Walk {
         best,
         closest,
         u,
         v,
-        tied,
     } = walk::<S, T, KX, KY, KZ, ANY_HIT>(lanes, triangle_lanes, bvh, &prepared, 0, start, stack);
     if best == NO_HIT {
         return None;
@@ -488,25 +485,16 @@ fn traverse<
     if ANY_HIT {
         return Some((0, 0.0, 0.0, 0.0));
     }
-    if tied {
-        return retrace_tie::<KX, KY, KZ>(
-            bvh,
-            ray.origin.to_array(),
-            ray.direction.to_array(),
-            ray.tmax,
-        );
-    }
     let index = best as usize;
     debug_assert_eq!(
-        prepared.intersect_triangle::<KX, KY, KZ>(&bvh.triangles[index], f32::INFINITY),
+        prepared.intersect_triangle::<KX, KY, KZ>(&bvh.triangles[index], f32::INFINITY, false),
         Some((closest, u, v))
     );
     Some((index, closest, u, v))
 }
 
-/// Where a walk stands: the best hit's leaf-order triangle ([`NO_HIT`] if none),
-/// the distance it searches below (the best hit's), and whether another triangle
-/// hit at exactly that distance (decided by the binary traversal at the end).
+/// Where a walk stands: the best hit's leaf-order triangle ([`NO_HIT`] if none)
+/// and the distance it searches below (the best hit's).
 #[derive(Clone, Copy, Debug)]
 struct Walk {
     best: u32,
@@ -514,7 +502,6 @@ struct Walk {
     /// The best hit's barycentrics.
     u: f32,
     v: f32,
-    tied: bool,
 }
 
 const NO_HIT: u32 = u32::MAX;
@@ -558,7 +545,6 @@ fn walk<
         mut closest,
         mut u,
         mut v,
-        mut tied,
     } = start;
     let mut current = root;
     'visit: loop {
@@ -629,22 +615,21 @@ fn walk<
                         closest,
                         u,
                         v,
-                        tied,
                     };
                 }
                 while hits != 0 {
                     let lane = hits.trailing_zeros() as usize;
                     hits &= hits - 1;
-                    if t[lane] < closest {
+                    let index = group.first + lane as u32;
+                    // A tie goes to the lower leaf-order index (`best` is
+                    // NO_HIT, the highest, only while `closest` is the ray's
+                    // tmax, which no hit may reach). A lane of this group may
+                    // also have become farther than `closest` since the test.
+                    if t[lane] < closest || (t[lane] == closest && index < best && best != NO_HIT) {
                         closest = t[lane];
                         u = found.u[lane];
                         v = found.v[lane];
-                        best = group.first + lane as u32;
-                        tied = false;
-                    } else if t[lane] == closest && best != NO_HIT {
-                        // Decided below. (A lane of this group may also have
-                        // become farther than `closest` since the test.)
-                        tied = true;
+                        best = index;
                     }
                 }
                 if group.last {
@@ -670,25 +655,7 @@ fn walk<
         closest,
         u,
         v,
-        tied,
     }
-}
-
-/// A tie: the binary traversal decides (rare: exact ties only).
-#[cold]
-#[inline(never)]
-fn retrace_tie<const KX: usize, const KY: usize, const KZ: usize>(
-    bvh: &Bvh,
-    origin: [f32; 3],
-    direction: [f32; 3],
-    tmax: f32,
-) -> Found {
-    let ray = Ray {
-        origin: origin.into(),
-        direction: direction.into(),
-        tmax,
-    };
-    bvh.traverse_axes::<KX, KY, KZ, false>(&ray)
 }
 
 /// Slab tests of all children, exactly as [`PreparedRay::entry_distance`] and

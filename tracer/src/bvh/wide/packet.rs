@@ -8,11 +8,11 @@
 //!
 //! Each lane does the scalar tests' IEEE operations on its own ray, so distances,
 //! culling and hits per ray are exactly those of the single-ray traversal; ties
-//! are retraced by the binary traversal as there.
+//! go to the lowest leaf-order index as there.
 
 use super::super::simd::{Lanes, Lanes8, LanesExt};
 use super::{
-    planes, retrace_tie, walk, watertight, Bvh, Found, PreparedRay, Ray, Stack, Walk, LEAF, NO_HIT,
+    planes, walk, watertight, Bvh, Found, PreparedRay, Ray, Stack, Walk, LEAF, NO_HIT,
     ROBUST_FAR_SCALE, STACK_ENTRIES, WIDTH,
 };
 
@@ -136,8 +136,6 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
     // The best hits' barycentrics.
     let (mut hit_u, mut hit_v) = (zero, zero);
     let mut best = [NO_HIT; MAX_PACKET];
-    // Rays with another triangle hit at exactly `closest` (decided at the end).
-    let mut tied = 0u32;
     let scale = lanes.splat(ROBUST_FAR_SCALE);
     let infinity = lanes.splat(f32::INFINITY);
 
@@ -160,7 +158,6 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
                     closest: closest_row[lane],
                     u: u_row[lane],
                     v: v_row[lane],
-                    tied: tied & (1 << lane) != 0,
                 };
                 let prepared = PreparedRay::new::<KX, KY, KZ>(&rays[lane]);
                 let end = walk::<S, T, KX, KY, KZ, false>(
@@ -176,7 +173,6 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
                 closest_row[lane] = end.closest;
                 u_row[lane] = end.u;
                 v_row[lane] = end.v;
-                tied = (tied & !(1 << lane)) | (u32::from(end.tied) << lane);
             }
             closest = lanes.load_row(&closest_row);
             hit_u = lanes.load_row(&u_row);
@@ -254,23 +250,24 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
                         continue;
                     }
                     let closer = hits & lanes.lt(crossing.t, closest);
-                    let mut had_hit = 0;
+                    // Rays that take this triangle: those it is closer for, and
+                    // those it ties with a hit of a higher leaf-order index.
+                    let index = group.first + lane as u32;
+                    let mut taken = closer;
                     let mut updated = hits;
                     while updated != 0 {
                         let ray = updated.trailing_zeros() as usize;
                         updated &= updated - 1;
-                        had_hit |= u32::from(best[ray] != NO_HIT) << ray;
-                        if closer & (1 << ray) != 0 {
-                            best[ray] = group.first + lane as u32;
+                        if closer & (1 << ray) != 0 || (best[ray] != NO_HIT && index < best[ray]) {
+                            best[ray] = index;
+                            taken |= 1 << ray;
                         }
                     }
-                    // Equal to a hit found before: decided at the end.
-                    tied = (tied & !closer) | (hits & !closer & had_hit);
-                    if closer != 0 {
-                        closest = lanes.select(closer, crossing.t, closest);
+                    if taken != 0 {
+                        closest = lanes.select(taken, crossing.t, closest);
                         let (u, v) = crossing.barycentrics(lanes);
-                        hit_u = lanes.select(closer, u, hit_u);
-                        hit_v = lanes.select(closer, v, hit_v);
+                        hit_u = lanes.select(taken, u, hit_u);
+                        hit_v = lanes.select(taken, v, hit_v);
                     }
                 }
                 if group.last {
@@ -301,18 +298,14 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
     for (lane, (ray, result)) in rays.iter().zip(found.iter_mut()).enumerate() {
         *result = if best[lane] == NO_HIT {
             None
-        } else if tied & (1 << lane) != 0 {
-            retrace_tie::<KX, KY, KZ>(
-                bvh,
-                ray.origin.to_array(),
-                ray.direction.to_array(),
-                ray.tmax,
-            )
         } else {
             let index = best[lane] as usize;
             debug_assert_eq!(
-                PreparedRay::new::<KX, KY, KZ>(ray)
-                    .intersect_triangle::<KX, KY, KZ>(&bvh.triangles[index], f32::INFINITY),
+                PreparedRay::new::<KX, KY, KZ>(ray).intersect_triangle::<KX, KY, KZ>(
+                    &bvh.triangles[index],
+                    f32::INFINITY,
+                    false
+                ),
                 Some((closest[lane], u[lane], v[lane]))
             );
             Some((index, closest[lane], u[lane], v[lane]))

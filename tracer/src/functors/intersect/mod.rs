@@ -1,6 +1,9 @@
 //! `intersect(ray: Ray) -> (hit: Hit)`: the closest hit of each ray with
-//! `0 < t < ray.tmax`, triangles named in input file order. Dead rays (`tmax <=
-//! 0`) miss without a traversal.
+//! `0 < t < ray.tmax`, triangles named in input file order. Of triangles hit at
+//! exactly the same distance (a ray through a shared edge, or overlapping copies
+//! of a surface), the first in the BVH's leaf order: the same one on every
+//! backend and traversal, whatever order they visit nodes in. Dead rays (`tmax
+//! <= 0`) miss without a traversal.
 
 use crate::functors::wgsl::{
     bvh_module, request_resources, stack_overflow_failure, twin, vector_module, TwinParts,

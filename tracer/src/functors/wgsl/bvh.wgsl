@@ -1,7 +1,8 @@
 // Module `tracer_bvh`: the CPU's BVH traversal (`Bvh::traverse_axes` in
 // tracer/src/bvh.rs) and its watertight triangle test, step by step, so that
 // the GPU visits nodes and triangles in the CPU's order and keeps the same
-// closest hit (a hit replaces the best one only when strictly closer). Needs
+// closest hit (of hits at exactly the same distance, the lowest leaf-order
+// triangle, whatever the order of visits). Needs
 // `tracer_vector`. Constants from Rust are prepended:
 // TRACER_BVH_MAX_STACK_DEPTH (u32), TRACER_BVH_ROBUST_FAR_SCALE (f32).
 //
@@ -111,8 +112,9 @@ fn tracer_bvh_edge_exact(px: f32, py: f32, qx: f32, qy: f32) -> f32 {
 }
 
 // Watertight ray-triangle test (Woop, Benthin, Wald 2013, two-sided) of
-// leaf-order triangle `index`: `intersect_triangle` on the CPU.
-fn tracer_bvh_intersect_triangle(ray: TracerBvhRay, index: u32, tmax: f32) -> TracerBvhTriangleHit {
+// leaf-order triangle `index`: `intersect_triangle` on the CPU. Hits at
+// `0 < t < tmax`, or `0 < t <= tmax` with `up_to_tmax`.
+fn tracer_bvh_intersect_triangle(ray: TracerBvhRay, index: u32, tmax: f32, up_to_tmax: bool) -> TracerBvhTriangleHit {
     let miss = TracerBvhTriangleHit(false, 0.0, 0.0, 0.0);
     let base = index * 9u;
     let v0 = vec3<f32>(tracer_bvh_triangles[base], tracer_bvh_triangles[base + 1u], tracer_bvh_triangles[base + 2u]);
@@ -145,7 +147,7 @@ fn tracer_bvh_intersect_triangle(ray: TracerBvhRay, index: u32, tmax: f32) -> Tr
         return miss;
     }
     let t = (u * az + v * bz + w * cz) / determinant;
-    if (t > 0.0 && t < tmax) {
+    if (t > 0.0 && (t < tmax || (up_to_tmax && t == tmax))) {
         return TracerBvhTriangleHit(true, t, v / determinant, w / determinant);
     }
     return miss;
@@ -199,7 +201,8 @@ fn tracer_bvh_traverse(origin: vec3<f32>, direction: vec3<f32>, tmax: f32, any_h
             }
             let first = child_index[side];
             for (var triangle = first; triangle < first + child_count[side]; triangle = triangle + 1u) {
-                let hit = tracer_bvh_intersect_triangle(ray, triangle, closest);
+                // A tie with the best hit goes to the lower leaf-order index.
+                let hit = tracer_bvh_intersect_triangle(ray, triangle, closest, found && triangle < best_triangle);
                 if (hit.found) {
                     found = true;
                     best_triangle = triangle;
