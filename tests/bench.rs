@@ -126,6 +126,19 @@ fn a_tiny_bench_writes_tables_json_and_a_chart() {
         [1, 2, 3]
     );
     let w1 = &workloads[0];
+    // WORKLOAD2 and 3 relate their fused frame to WORKLOAD1's intersection
+    // time (the bar), in the JSON and in the table's last column.
+    let intersect_ms = w1["unfused"]["intersect_ms"].as_f64().unwrap();
+    assert!(w1["fused_over_workload1_intersect"].is_null());
+    for w in &workloads[1..] {
+        let over = w["fused_over_workload1_intersect"].as_f64().unwrap();
+        let fused_ms = w["fused"]["mean_frame_ms"].as_f64().unwrap();
+        assert!((over - fused_ms / intersect_ms).abs() < 1e-9 * over, "{w}");
+        let cell = format!("| {:.2}× |", over);
+        let row = format!("| builtin:16 | front | WORKLOAD{} |", w["workload"]);
+        let line = markdown.lines().find(|l| l.starts_with(&row)).unwrap();
+        assert!(line.ends_with(&cell), "{line} should end with {cell}");
+    }
     assert!(w1["unfused"]["intersect_mrays_per_s"].as_f64().unwrap() > 0.0);
     assert!(w1["fused"]["frame_mrays_per_s"].as_f64().unwrap() > 0.0);
     assert_eq!(w1["fused"]["frames_ms"].as_array().unwrap().len(), 1);

@@ -382,6 +382,17 @@ pub struct ViewResult {
     pub engines: Vec<EngineResult>,
 }
 
+impl ViewResult {
+    /// WORKLOAD1's intersection time (its unfused `map<intersect>` stage), if
+    /// WORKLOAD1 ran.
+    pub fn workload1_intersect_ms(&self) -> Option<f64> {
+        self.workloads
+            .iter()
+            .find(|w| w.workload == 1)
+            .and_then(|w| w.unfused.intersect_ms())
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct SceneResult {
     pub name: String,
