@@ -10,7 +10,7 @@ mod common;
 
 use common::{mean_flip, scene_dir, Image, SCENE_VIEW};
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
 /// Largest mean FLIP between the backends' images. The GPU's float maths
 /// rounds differently (fused multiply-adds, `sqrt`, `pow`), which moves a few
@@ -20,21 +20,13 @@ const BACKEND_TOLERANCE: f32 = 0.01;
 /// Least fraction of pixels whose `prim` must be identical.
 const PRIM_AGREEMENT: f64 = 0.999;
 
-fn dpp(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dpp"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .unwrap()
-}
-
 /// Runs `dpp run PIPELINE ARGS --backend BACKEND` in `dir`; returns its stdout.
 fn run(dir: &Path, pipeline: &Path, args: &[String], backend: &str) -> String {
     let mut all = vec!["run".to_string(), pipeline.display().to_string()];
     all.extend(args.iter().cloned());
     all.extend(["--backend".to_string(), backend.to_string()]);
     let all: Vec<&str> = all.iter().map(String::as_str).collect();
-    let output = dpp(dir, &all);
+    let output = common::dpp(&all, dir);
     assert!(
         output.status.success(),
         "dpp {all:?}: {}",

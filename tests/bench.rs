@@ -3,20 +3,9 @@
 
 mod common;
 
-use std::path::Path;
-use std::process::{Command, Output};
+use common::{dpp, text};
 
-fn dpp(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dpp"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("dpp runs")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
+use std::process::Command;
 
 fn pipelines() -> String {
     common::repo().join("pipelines").display().to_string()

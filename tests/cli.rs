@@ -4,20 +4,9 @@
 
 mod common;
 
+use common::{dpp, text};
+
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn dpp(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dpp"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("dpp runs")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
 
 fn pipeline(name: &str) -> String {
     common::repo()

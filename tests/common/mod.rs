@@ -2,9 +2,24 @@
 #![allow(dead_code)] // each test binary uses its own subset
 
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Runs the `dpp` binary with `args` in `dir`.
+pub fn dpp(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dpp"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("dpp runs")
+}
+
+/// A program's output as text.
+pub fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
 }
 
 /// Whether the GPU backend can start here: `dpp run --backend gpu` on a tiny
@@ -14,15 +29,14 @@ pub fn repo() -> PathBuf {
 pub fn gpu_available(what: &str) -> bool {
     let dir = tempfile::tempdir().unwrap();
     let pipeline = repo().join("pipelines/examples/prefix_sum.dpp");
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_dpp"))
-        .args(["run", pipeline.to_str().unwrap(), "--backend", "gpu"])
-        .current_dir(dir.path())
-        .output()
-        .unwrap();
+    let output = dpp(
+        &["run", pipeline.to_str().unwrap(), "--backend", "gpu"],
+        dir.path(),
+    );
     if output.status.success() {
         return true;
     }
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stderr = text(&output.stderr);
     if std::env::var_os("DPP_REQUIRE_GPU").is_some() {
         panic!("DPP_REQUIRE_GPU is set but the GPU backend failed: {stderr}");
     }
