@@ -20,28 +20,9 @@ use std::f64::consts::PI;
 use std::path::Path;
 use std::sync::Arc;
 
-/// Samples of `f` on a grid of `dims` samples spaced `spacing` apart from `origin`.
-fn volume(dims: UVec3, origin: Vec3, spacing: Vec3, f: impl Fn(Vec3, UVec3) -> f32) -> Volume {
-    let mut values = Vec::with_capacity((dims.x * dims.y * dims.z) as usize);
-    for k in 0..dims.z {
-        for j in 0..dims.y {
-            for i in 0..dims.x {
-                let s = UVec3::new(i, j, k);
-                values.push(f(origin + spacing * s.as_vec3(), s));
-            }
-        }
-    }
-    Volume {
-        dims,
-        spacing,
-        origin,
-        values,
-    }
-}
-
 /// The unit box sampled `n`³ times.
 fn unit_box(n: u32, f: impl Fn(Vec3, UVec3) -> f32) -> Volume {
-    volume(
+    Volume::from_fn(
         UVec3::splat(n),
         Vec3::ZERO,
         Vec3::splat(1.0 / (n - 1) as f32),
@@ -257,7 +238,7 @@ fn noise_with_ambiguous_faces_is_closed_and_oriented() {
 #[test]
 fn a_plane_between_samples_makes_two_triangles_per_cell() {
     // f = z on 9×6×5 samples spaced 1: the level 2.25 crosses one layer of 8×5 cells.
-    let plane = volume(UVec3::new(9, 6, 5), Vec3::ZERO, Vec3::ONE, |p, _| p.z);
+    let plane = Volume::from_fn(UVec3::new(9, 6, 5), Vec3::ZERO, Vec3::ONE, |p, _| p.z);
     let result = run_default(&plane, 2.25);
     assert_eq!(result.count, 2 * 8 * 5);
     let view = result.triangles.view();
@@ -276,7 +257,7 @@ fn a_plane_between_samples_makes_two_triangles_per_cell() {
     assert_eq!(mesh.positions.len(), 9 * 6);
     assert!((area(&mesh) - 40.0).abs() < 1e-4);
     // Decreasing field (f = -z): the same triangles, facing down.
-    let flipped = volume(UVec3::new(9, 6, 5), Vec3::ZERO, Vec3::ONE, |p, _| -p.z);
+    let flipped = Volume::from_fn(UVec3::new(9, 6, 5), Vec3::ZERO, Vec3::ONE, |p, _| -p.z);
     let down = run_default(&flipped, -2.25);
     assert_eq!(down.count, 80);
     let mesh = triangles_to_mesh(&down.triangles, false).unwrap();
@@ -510,7 +491,7 @@ fn compare_with_mcubes(name: &str, volume: &Volume, level: f32) -> (SoupStats, S
 fn matches_an_independent_marching_cubes() {
     // (a) A torus centred between samples: the distance to its core circle.
     let (major, minor) = (0.3f32, 0.12f32);
-    let torus = volume(
+    let torus = Volume::from_fn(
         UVec3::new(64, 57, 45),
         Vec3::ZERO,
         Vec3::new(1.0 / 63.0, 1.0 / 56.0, 0.8 / 44.0),

@@ -551,7 +551,8 @@ pub(crate) mod test_support {
     use crate::scene::{TraceResources, TraceScene};
     use crate::shading::Shading;
     use dpp_runtime::{
-        CallContext, Column, ColumnView, ElemType, FunctorLibrary, HostValue, Uniforms,
+        CallContext, Column, ColumnView, ElemType, FunctorLibrary, HostValue, RecordRegistry,
+        Uniforms,
     };
     use glam::Vec3;
     use std::sync::Arc;
@@ -632,22 +633,16 @@ pub(crate) mod test_support {
             ElemType::Record(self.library.records.find(name).unwrap())
         }
 
-        fn empty(&self, name: &str) -> Column {
-            Column::with_capacity(self.record(name), 0, &self.library.records)
-        }
-
         pub fn rays(&self, rays: &[RayRecord]) -> Column {
-            let mut column = self.empty("Ray");
-            let mut writer = RayWriter::new(&mut column, rays.len()).unwrap();
-            rays.iter().for_each(|&ray| writer.push(ray));
-            column
+            ray_column(&self.library.records, rays)
         }
 
         pub fn surfaces(&self, surfaces: &[SurfaceRecord]) -> Column {
-            let mut column = self.empty("Surface");
-            let mut writer = SurfaceWriter::new(&mut column, surfaces.len()).unwrap();
-            surfaces.iter().for_each(|&surface| writer.push(surface));
-            column
+            surface_column(&self.library.records, surfaces)
+        }
+
+        pub fn hits(&self, hits: &[(f32, u32, f32, f32)]) -> Column {
+            hit_column(&self.library.records, hits)
         }
 
         /// Runs functor `name` on one chunk starting at `first_index`.
@@ -705,6 +700,37 @@ pub(crate) mod test_support {
     }
 
     /// The rays of a `Ray` column.
+    /// A `Ray` column of `rays`.
+    pub fn ray_column(records: &RecordRegistry, rays: &[RayRecord]) -> Column {
+        let ty = ElemType::Record(records.find("Ray").unwrap());
+        let mut column = Column::with_capacity(ty, 0, records);
+        let mut writer = RayWriter::new(&mut column, rays.len()).unwrap();
+        rays.iter().for_each(|&ray| writer.push(ray));
+        column
+    }
+
+    /// A `Surface` column of `surfaces`.
+    pub fn surface_column(records: &RecordRegistry, surfaces: &[SurfaceRecord]) -> Column {
+        let ty = ElemType::Record(records.find("Surface").unwrap());
+        let mut column = Column::with_capacity(ty, 0, records);
+        let mut writer = SurfaceWriter::new(&mut column, surfaces.len()).unwrap();
+        surfaces.iter().for_each(|&surface| writer.push(surface));
+        column
+    }
+
+    /// A `Hit` column of `(t, prim, u, v)`s.
+    pub fn hit_column(records: &RecordRegistry, hits: &[(f32, u32, f32, f32)]) -> Column {
+        Column::Record {
+            ty: records.find("Hit").unwrap(),
+            fields: vec![
+                Arc::new(Column::F32(hits.iter().map(|h| h.0).collect())),
+                Arc::new(Column::U32(hits.iter().map(|h| h.1).collect())),
+                Arc::new(Column::F32(hits.iter().map(|h| h.2).collect())),
+                Arc::new(Column::F32(hits.iter().map(|h| h.3).collect())),
+            ],
+        }
+    }
+
     pub fn read_rays(column: &Column) -> Vec<RayRecord> {
         let view = column.view();
         let rays = super::RayColumns::new(&view);

@@ -197,6 +197,31 @@ impl Volume {
         Ok(())
     }
 
+    /// `f(position, sample)` at every sample of a `dims` grid spaced `spacing`
+    /// apart from `origin`, in storage order (x fastest). Not validated.
+    pub fn from_fn(
+        dims: UVec3,
+        origin: Vec3,
+        spacing: Vec3,
+        f: impl Fn(Vec3, UVec3) -> f32,
+    ) -> Volume {
+        let mut values = Vec::with_capacity(sample_count(dims.as_u64vec3().to_array()) as usize);
+        for k in 0..dims.z {
+            for j in 0..dims.y {
+                for i in 0..dims.x {
+                    let sample = UVec3::new(i, j, k);
+                    values.push(f(origin + spacing * sample.as_vec3(), sample));
+                }
+            }
+        }
+        Volume {
+            dims,
+            spacing,
+            origin,
+            values,
+        }
+    }
+
     pub fn index(&self, i: u32, j: u32, k: u32) -> usize {
         i as usize + self.dims.x as usize * (j as usize + self.dims.y as usize * k as usize)
     }

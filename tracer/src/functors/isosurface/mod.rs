@@ -269,21 +269,7 @@ mod tests {
     use super::*;
 
     fn volume(dims: UVec3, f: impl Fn(Vec3) -> f32) -> Volume {
-        let spacing = Vec3::new(0.5, 1.0, 2.0);
-        let mut values = Vec::new();
-        for k in 0..dims.z {
-            for j in 0..dims.y {
-                for i in 0..dims.x {
-                    values.push(f(spacing * UVec3::new(i, j, k).as_vec3()));
-                }
-            }
-        }
-        Volume {
-            dims,
-            spacing,
-            origin: Vec3::ZERO,
-            values,
-        }
+        Volume::from_fn(dims, Vec3::ZERO, Vec3::new(0.5, 1.0, 2.0), |p, _| f(p))
     }
 
     #[test]

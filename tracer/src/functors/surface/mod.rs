@@ -209,24 +209,7 @@ mod tests {
     use crate::mesh::TriangleMesh;
     use crate::scene::TraceScene;
     use crate::shading::{Material, MeshMaterials};
-    use dpp_runtime::{Column, ElemType};
     use glam::Vec3;
-    use std::sync::Arc;
-
-    fn hits(fixture: &Fixture, hits: &[(f32, u32, f32, f32)]) -> Column {
-        let ElemType::Record(ty) = fixture.record("Hit") else {
-            unreachable!("Hit is a record")
-        };
-        Column::Record {
-            ty,
-            fields: vec![
-                Arc::new(Column::F32(hits.iter().map(|h| h.0).collect())),
-                Arc::new(Column::U32(hits.iter().map(|h| h.1).collect())),
-                Arc::new(Column::F32(hits.iter().map(|h| h.2).collect())),
-                Arc::new(Column::F32(hits.iter().map(|h| h.3).collect())),
-            ],
-        }
-    }
 
     /// One triangle with distinct vertex normals and scalars, and a second one
     /// using material 1.
@@ -262,7 +245,7 @@ mod tests {
         from_above.depth = 2;
         let from_below = ray(Vec3::new(0.25, 0.5, -1.0), Vec3::Z, 9.0, 8);
         let rays = fixture.rays(&[from_above, from_below]);
-        let hit = hits(&fixture, &[(1.0, 0, u, v), (1.0, 0, u, v)]);
+        let hit = fixture.hits(&[(1.0, 0, u, v), (1.0, 0, u, v)]);
         let out = fixture
             .run("surface", &[], 0, &[rays.view(), hit.view()])
             .unwrap();
@@ -336,14 +319,11 @@ mod tests {
             reflected,
             dead,
         ]);
-        let hit = hits(
-            &fixture,
-            &[
-                (1.0, 1, 0.2, 0.2),
-                (f32::INFINITY, MISS_PRIM, 0.0, 0.0),
-                (f32::INFINITY, MISS_PRIM, 0.0, 0.0),
-            ],
-        );
+        let hit = fixture.hits(&[
+            (1.0, 1, 0.2, 0.2),
+            (f32::INFINITY, MISS_PRIM, 0.0, 0.0),
+            (f32::INFINITY, MISS_PRIM, 0.0, 0.0),
+        ]);
         let out = fixture
             .run("surface", &[], 0, &[rays.view(), hit.view()])
             .unwrap();
@@ -380,7 +360,7 @@ mod tests {
     fn unknown_triangle_is_an_error() {
         let fixture = fixture();
         let rays = fixture.rays(&[ray(Vec3::Z, Vec3::NEG_Z, 9.0, 0)]);
-        let hit = hits(&fixture, &[(1.0, 5, 0.0, 0.0)]);
+        let hit = fixture.hits(&[(1.0, 5, 0.0, 0.0)]);
         let error = fixture
             .run("surface", &[], 0, &[rays.view(), hit.view()])
             .unwrap_err();

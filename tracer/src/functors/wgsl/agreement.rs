@@ -11,8 +11,10 @@
 
 use crate::camera::{Camera, CameraSetup};
 use crate::functors::isosurface::{register_isosurface_functors, volume_uniforms, VolumeResources};
-use crate::functors::test_support::{read_surfaces, Fixture};
-use crate::functors::{RayRecord, RayWriter, SurfaceRecord, SurfaceWriter};
+use crate::functors::test_support::{
+    hit_column, ray_column, read_surfaces, surface_column, Fixture,
+};
+use crate::functors::{RayRecord, SurfaceRecord};
 use crate::scene::TraceScene;
 use crate::shading::{Material, MeshMaterials, PointLight};
 use crate::volume::Volume;
@@ -183,10 +185,6 @@ impl Env {
             .expect("a scene's environment")
     }
 
-    fn record(&self, name: &str) -> ElemType {
-        ElemType::Record(self.library.records.find(name).unwrap())
-    }
-
     /// Functor `name`'s Rust code over all of `inputs` at once (the first chunk).
     fn cpu(
         &self,
@@ -247,32 +245,15 @@ impl Env {
     }
 
     fn rays(&self, rays: &[RayRecord]) -> Column {
-        let mut column = Column::with_capacity(self.record("Ray"), 0, &self.library.records);
-        let mut writer = RayWriter::new(&mut column, rays.len()).unwrap();
-        rays.iter().for_each(|&ray| writer.push(ray));
-        column
+        ray_column(&self.library.records, rays)
     }
 
     fn surfaces(&self, surfaces: &[SurfaceRecord]) -> Column {
-        let mut column = Column::with_capacity(self.record("Surface"), 0, &self.library.records);
-        let mut writer = SurfaceWriter::new(&mut column, surfaces.len()).unwrap();
-        surfaces.iter().for_each(|&surface| writer.push(surface));
-        column
+        surface_column(&self.library.records, surfaces)
     }
 
     fn hits(&self, hits: &[(f32, u32, f32, f32)]) -> Column {
-        let ElemType::Record(ty) = self.record("Hit") else {
-            unreachable!("Hit is a record")
-        };
-        Column::Record {
-            ty,
-            fields: vec![
-                Arc::new(Column::F32(hits.iter().map(|h| h.0).collect())),
-                Arc::new(Column::U32(hits.iter().map(|h| h.1).collect())),
-                Arc::new(Column::F32(hits.iter().map(|h| h.2).collect())),
-                Arc::new(Column::F32(hits.iter().map(|h| h.3).collect())),
-            ],
-        }
+        hit_column(&self.library.records, hits)
     }
 }
 
@@ -387,7 +368,7 @@ fn envs() -> Envs {
         curved: curved_env(),
         sphere: Env::volume(
             "sphere",
-            volume(
+            Volume::from_fn(
                 UVec3::new(9, 8, 7),
                 Vec3::new(-1.1, 0.3, 2.0),
                 Vec3::new(0.25, 0.3, 0.35),
@@ -395,7 +376,7 @@ fn envs() -> Envs {
             ),
         ),
         integers: Env::volume("integers", {
-            let mut v = volume(UVec3::new(7, 6, 5), Vec3::ZERO, Vec3::ONE, |_, s| {
+            let mut v = Volume::from_fn(UVec3::new(7, 6, 5), Vec3::ZERO, Vec3::ONE, |_, s| {
                 ((s.x * 7 + s.y * 3 + s.z * 5) % 11) as f32
             });
             v.values[40] = f32::NAN;
@@ -404,7 +385,7 @@ fn envs() -> Envs {
         }),
         thin: Env::volume(
             "thin",
-            volume(
+            Volume::from_fn(
                 UVec3::new(6, 2, 5),
                 Vec3::new(1.0, -2.0, 0.5),
                 Vec3::new(0.5, 2.0, 0.125),
@@ -477,25 +458,6 @@ fn curved_env() -> Env {
     )
     .unwrap();
     Env::trace("curved", fixture, Some(camera))
-}
-
-/// `f(position, sample)` on a grid of `dims` samples.
-fn volume(dims: UVec3, origin: Vec3, spacing: Vec3, f: impl Fn(Vec3, UVec3) -> f32) -> Volume {
-    let mut values = Vec::new();
-    for k in 0..dims.z {
-        for j in 0..dims.y {
-            for i in 0..dims.x {
-                let s = UVec3::new(i, j, k);
-                values.push(f(origin + spacing * s.as_vec3(), s));
-            }
-        }
-    }
-    Volume {
-        dims,
-        spacing,
-        origin,
-        values,
-    }
 }
 
 /// A small deterministic generator (SplitMix64).
