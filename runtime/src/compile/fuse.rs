@@ -379,7 +379,6 @@ impl StageFormer<'_> {
         let input = || Some(HostExpr::Len(*op.inputs.first()?));
         match &op.kind {
             OpKind::Iota { count } | OpKind::Fill { count, .. } => Some(count.clone()),
-            _ if is_elementwise_group(op) => input(),
             OpKind::GroupGather { group } => Some(HostExpr::Binary(
                 BinaryOp::Div,
                 Box::new(input()?),
