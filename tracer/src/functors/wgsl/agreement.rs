@@ -12,7 +12,7 @@
 use crate::camera::{Camera, CameraSetup};
 use crate::functors::isosurface::{register_isosurface_functors, volume_uniforms, VolumeResources};
 use crate::functors::test_support::{
-    hit_column, ray_column, read_surfaces, surface_column, Fixture,
+    hit_column, ray, ray_column, read_surfaces, surface_column, Fixture,
 };
 use crate::functors::{RayRecord, SurfaceRecord};
 use crate::scene::TraceScene;
@@ -506,17 +506,6 @@ fn int(x: i64) -> HostValue {
 
 fn float(x: f64) -> HostValue {
     HostValue::Float(x)
-}
-
-fn ray(origin: Vec3, dir: Vec3, tmax: f32, sample: u32) -> RayRecord {
-    RayRecord {
-        origin,
-        dir,
-        tmax,
-        sample,
-        weight: Vec3::ONE,
-        depth: 0,
-    }
 }
 
 /// Rays of the fixture's squares at their vertices and edges (the small
