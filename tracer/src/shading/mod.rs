@@ -26,10 +26,12 @@
 mod colormap;
 mod material;
 mod scene_file;
+mod srgb;
 
-pub use colormap::{linear_to_srgb, srgb_to_linear, ColorMap, COLORMAP_NAMES, COLORMAP_SIZE};
+pub use colormap::{ColorMap, COLORMAP_NAMES, COLORMAP_SIZE};
 pub use material::{Material, MeshMaterials, DEFAULT_MATERIAL};
 pub use scene_file::{ColorSpec, LightSpec, MaterialSpec, SceneFile};
+pub use srgb::{encode_in_place as encode_srgb_in_place, linear_to_srgb, srgb_to_linear};
 
 use crate::mesh::Bounds;
 use crate::scene::TraceScene;

@@ -1,6 +1,7 @@
 //! `antiAlias(color: vec3) -> (pixel: vec3)`, a group functor used as
 //! `gather<antiAlias>(color, group: spp)`: the mean of a pixel's `k` samples
-//! (linear RGB), clamped to [0, 1] and encoded with the sRGB transfer function.
+//! (linear RGB), clamped to [0, 1] and encoded with the sRGB transfer function
+//! (`crate::shading::linear_to_srgb`).
 //!
 //! This is where display encoding happens: the PNG writer writes the values it
 //! gets as they are (scaled to 8 bits), so a pipeline whose colours are linear
@@ -8,7 +9,7 @@
 //! sample per pixel. NaN components become 0.
 
 use crate::functors::wgsl::{f32_literal, twin, vector_module, TwinParts};
-use crate::shading::linear_to_srgb;
+use crate::shading::encode_srgb_in_place;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
@@ -74,48 +75,22 @@ impl Functor for AntiAlias {
         let colors = inputs[0].as_vec3();
         let scale = 1.0 / samples as f32;
         let out = outputs[0].as_vec3_mut();
-        let mut encode = Encoder::default();
+        let first = out.len();
+        // `max` first: it maps NaN to 0.
+        let clamp = |mean: Vec3| mean.max(Vec3::ZERO).min(Vec3::ONE);
         if samples == 1 {
             // The sum of one sample, as `Sum` folds it (from zero).
-            out.extend(
-                colors
-                    .iter()
-                    .map(|&c| encode.mean((Vec3::ZERO + c) * scale)),
-            );
+            out.extend(colors.iter().map(|&c| clamp((Vec3::ZERO + c) * scale)));
         } else {
             out.extend(
                 colors
                     .chunks_exact(samples)
-                    .map(|group| encode.mean(group.iter().copied().sum::<Vec3>() * scale)),
+                    .map(|group| clamp(group.iter().copied().sum::<Vec3>() * scale)),
             );
         }
+        // The means' components in one run, for the SIMD encoder.
+        encode_srgb_in_place(bytemuck::cast_slice_mut(&mut out[first..]));
         Ok(())
-    }
-}
-
-/// Clamps and sRGB-encodes means, remembering the last one: neighbouring
-/// pixels often have exactly the same colour (the background), and the
-/// encoding's `powf`s are what costs here. The result is `linear_to_srgb`'s.
-#[derive(Default)]
-struct Encoder {
-    /// The bits of the last clamped mean and its encoding.
-    last: Option<([u32; 3], Vec3)>,
-}
-
-impl Encoder {
-    #[inline(always)]
-    fn mean(&mut self, mean: Vec3) -> Vec3 {
-        // `max` first: it maps NaN to 0.
-        let clamped = mean.max(Vec3::ZERO).min(Vec3::ONE);
-        let bits = clamped.to_array().map(f32::to_bits);
-        match self.last {
-            Some((last, encoded)) if last == bits => encoded,
-            _ => {
-                let encoded = linear_to_srgb(clamped);
-                self.last = Some((bits, encoded));
-                encoded
-            }
-        }
     }
 }
 
