@@ -3,7 +3,8 @@
 // does, clamped to [0, 1] (NaN to 0) and sRGB-encoded.
 // Failure 0: the group is empty.
 
-// `linear_to_srgb` of tracer/src/shading/colormap.rs for one component in [0, 1].
+// `linear_to_srgb` of tracer/src/shading/srgb.rs for one component in [0, 1]
+// (there a series, correctly rounded; `pow` here, within the GPU's precision).
 fn $FUNCTION_encode(x: f32) -> f32 {
     if (x <= $SRGB_LINEAR_LIMIT) {
         return x * 12.92f;
