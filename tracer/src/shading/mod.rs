@@ -26,6 +26,7 @@
 mod colormap;
 mod material;
 mod scene_file;
+mod series;
 mod srgb;
 
 pub use colormap::{ColorMap, COLORMAP_NAMES, COLORMAP_SIZE};

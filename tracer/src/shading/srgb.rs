@@ -2,15 +2,18 @@
 //!
 //! Encoding runs on every component of every pixel of every frame (`antiAlias`),
 //! where three `powf` calls per pixel were an eighth of a WORKLOAD2 frame. So
-//! [`encode_component`] computes `x^(1/2.4)` as `2^(log2(x) · 5/12)` from two
-//! short series, without branches or calls: a slice of components
-//! ([`encode_in_place`]) compiles to SIMD, and on x86-64 runs in AVX-512 or AVX2
-//! where the CPU has them. The series run in f64 and use only `+ - * /`, no
-//! fused multiply-add, so every instruction set gives the same bits, and the
-//! result, rounded to f32 once, is within one unit in the last place of the
-//! exact value (tested over the whole range): as close as `powf` gets.
+//! [`encode_component`] computes `x^(1/2.4)` as `2^(log2(x) · 5/12)` from the
+//! f64 series of `super::series`, without branches or calls: a slice of
+//! components ([`encode_in_place`]) compiles to SIMD, and on x86-64 runs in
+//! AVX-512 or AVX2 where the CPU has them (`multiversion` picks at run time),
+//! with the same bits everywhere. The
+//! result, rounded to f32 once, is within half a unit in the last place of the
+//! exact curve (tested over the whole range), so 8-bit pixels come out as they
+//! did with `powf`.
 
+use super::series::{exp2, log2};
 use glam::Vec3;
+use multiversion::multiversion;
 
 /// At or below this, the curve is the straight line `12.92 x`.
 const LINEAR_LIMIT: f32 = 0.003_130_8;
@@ -39,40 +42,13 @@ pub fn linear_to_srgb(c: Vec3) -> Vec3 {
     )
 }
 
-/// Every component of `values` encoded as [`encode_component`] does.
-pub fn encode_in_place(values: &mut [f32]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has the feature.
-            return unsafe { encode_in_place_avx512(values) };
-        }
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has the feature.
-            return unsafe { encode_in_place_avx2(values) };
-        }
-    }
-    encode_in_place_portable(values)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn encode_in_place_avx512(values: &mut [f32]) {
-    encode_in_place_portable(values)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn encode_in_place_avx2(values: &mut [f32]) {
-    encode_in_place_portable(values)
-}
-
 /// Components go in blocks of 48 (16 RGB pixels). A block the same as the one
 /// before (bit for bit: runs of background) copies its encoding.
 const BLOCK: usize = 48;
 
-#[inline(always)]
-fn encode_in_place_portable(values: &mut [f32]) {
+/// Every component of `values` encoded as [`encode_component`] does.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
+pub fn encode_in_place(values: &mut [f32]) {
     let mut last: Option<([u32; BLOCK], [f32; BLOCK])> = None;
     let mut blocks = values.chunks_exact_mut(BLOCK);
     for block in &mut blocks {
@@ -97,7 +73,8 @@ fn encode_in_place_portable(values: &mut [f32]) {
 /// exactly 1 from 1 up (where the formula rounds to 0.99999994); NaN stays NaN.
 #[inline(always)]
 pub fn encode_component(x: f32) -> f32 {
-    let curve = (1.055 * pow_five_twelfths(x) - 0.055) as f32;
+    // 1/2.4 = 5/12.
+    let curve = (1.055 * exp2(log2(x) * (5.0 / 12.0)) - 0.055) as f32;
     if x <= LINEAR_LIMIT {
         x * 12.92
     } else if x < 1.0 {
@@ -109,48 +86,9 @@ pub fn encode_component(x: f32) -> f32 {
     }
 }
 
-/// `x^(5/12)` for normal `x` in (0, 1] (1/2.4 = 5/12), in f64 to about 1e-11,
-/// so that the f32 it is rounded to is almost always the nearest one. Other
-/// inputs give some number, which `encode_component` does not use.
-#[inline(always)]
-fn pow_five_twelfths(x: f32) -> f64 {
-    // x = m · 2^e with m in [√½, √2), both exact.
-    let bits = x.to_bits();
-    let mantissa = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
-    let large = mantissa > std::f32::consts::SQRT_2;
-    let m = f64::from(if large { 0.5 * mantissa } else { mantissa });
-    let e = ((bits >> 23) & 0xff) as i32 - 127 + i32::from(large);
-    // ln m = 2 atanh(t) = 2 (t + t³/3 + t⁵/5 + …), t = (m-1)/(m+1), |t| < 0.172:
-    // the first omitted term (t¹⁵/15) is below 2e-13.
-    let t = (m - 1.0) / (m + 1.0);
-    let t2 = t * t;
-    let series = 1.0
-        + t2 * (1.0 / 3.0
-            + t2 * (1.0 / 5.0
-                + t2 * (1.0 / 7.0 + t2 * (1.0 / 9.0 + t2 * (1.0 / 11.0 + t2 * (1.0 / 13.0))))));
-    let ln_m = 2.0 * t * series;
-    // (5/12) log2 x = 5e/12 + (5/12) ln m / ln 2. The integer part of 5e/12 is
-    // split off exactly (with 5e shifted by 12 · 53, as e ≥ -127, the division
-    // is of a number ≥ 0), which leaves a small argument for the series below.
-    let five_e = (5 * e + 12 * 53) as u32;
-    let whole = (five_e / 12) as i32 - 53;
-    let remainder = f64::from(five_e % 12) / 12.0;
-    let fraction = remainder + ln_m * (5.0 / 12.0 * std::f64::consts::LOG2_E);
-    // 2^fraction for fraction in (-0.15, 1.07): round it to the nearest integer
-    // `k` (0 or 1) and sum e^z, z = (fraction - k) ln 2, |z| ≤ 0.35, to the
-    // term of degree 9 (the first omitted one is below 1e-11).
-    let k = if fraction > 0.5 { 1 } else { 0 };
-    let z = (fraction - f64::from(k)) * std::f64::consts::LN_2;
-    let mut exp = 1.0 / 362_880.0;
-    for factorial in [40_320.0, 5040.0, 720.0, 120.0, 24.0, 6.0, 2.0, 1.0, 1.0] {
-        exp = exp * z + 1.0 / factorial;
-    }
-    let scale = f64::from_bits(((whole + k + 1023).clamp(1, 2046) as u64) << 52);
-    exp * scale
-}
-
 #[cfg(test)]
 mod tests {
+    use super::super::series::ulps;
     use super::*;
 
     /// The curve in f64 (the line with the f32 slope the code uses).
@@ -173,9 +111,7 @@ mod tests {
         let one = 1.0f32.to_bits();
         for bits in (f32::MIN_POSITIVE.to_bits()..=one).step_by(7).chain([one]) {
             let x = f32::from_bits(bits);
-            let exact = exact(x);
-            let ulp = f64::from(f32::EPSILON) * f64::from(2f32.powi(exact.log2().floor() as i32));
-            let error = (f64::from(encode_component(x)) - exact).abs() / ulp;
+            let error = ulps(encode_component(x), exact(x));
             if error > worst {
                 (worst, worst_at) = (error, x);
             }
@@ -202,17 +138,14 @@ mod tests {
     }
 
     #[test]
-    fn a_slice_encodes_as_its_components_do_on_every_instruction_set() {
+    fn a_slice_encodes_as_its_components_do() {
         // Whole blocks, repeated blocks and a remainder.
         let mut values: Vec<f32> = (0..1000).map(|i| i as f32 / 997.0 - 0.001).collect();
         values.extend([0.25; 2 * BLOCK + 5]);
         let mut encoded = values.clone();
         encode_in_place(&mut encoded);
-        let mut portable = values.clone();
-        encode_in_place_portable(&mut portable);
-        for ((x, fast), slow) in values.iter().zip(&encoded).zip(&portable) {
+        for (x, fast) in values.iter().zip(&encoded) {
             assert_eq!(fast.to_bits(), encode_component(*x).to_bits(), "{x}");
-            assert_eq!(slow.to_bits(), fast.to_bits(), "{x}");
         }
     }
 
