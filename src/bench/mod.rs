@@ -23,8 +23,9 @@ use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext, RunResult, Stage
 use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{CompileOptions, FunctorLibrary, Plan};
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
+use dpp_tracer::camera::sample_offset;
 use dpp_tracer::shading::MeshMaterials;
-use dpp_tracer::{StandardView, TraceScene, TriangleMesh, MISS_PRIM};
+use dpp_tracer::{Camera, StandardView, TraceScene, TriangleMesh, MISS_PRIM};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -32,17 +33,26 @@ use std::time::{Duration, Instant};
 
 pub use report::{GpuInfo, Report};
 
-/// Hits agree when both engines hit the same number of rays (give or take
-/// [`GRAZING_RAYS_PER_MILLION`]) and, for at least this share of the rays, name
-/// the same triangle or (a tie between overlapping triangles) a different one at
-/// the same distance.
+/// Hits agree when, for at least this share of the rays, both engines name the
+/// same triangle or (a tie between overlapping triangles) a different one at
+/// the same distance, and when the rays that one engine hits and the other
+/// misses are all at a triangle's border (give or take
+/// [`ONE_SIDED_RAYS_PER_MILLION`]).
 pub const AGREEMENT: f64 = 0.999;
 
-/// Rays in a million that may hit in one engine and miss in the other: a ray
-/// that grazes an edge on the surface's silhouette or open border, where the two
-/// watertight tests break the tie differently (measured: at most one ray of the
-/// 2M of a 1080p frame, in some views).
-pub const GRAZING_RAYS_PER_MILLION: u64 = 1;
+/// Rays in a million that may hit in one engine and miss in the other away from
+/// any triangle's border (measured: at most one ray of the 2M of a 1080p frame,
+/// in some views).
+pub const ONE_SIDED_RAYS_PER_MILLION: u64 = 1;
+
+/// A ray is at a triangle's border when it meets the triangle's plane within
+/// this of the border, in barycentric coordinates (a ten-thousandth of the
+/// triangle's size). There the two watertight tests round either way: on an
+/// open border (a lone triangle's edge through a row of pixel centres) Embree's
+/// robust test hits hundreds of rays that, in exact arithmetic, pass just
+/// outside, and dpp misses them.
+#[cfg_attr(not(feature = "embree"), allow(dead_code))]
+const BORDER_BAND: f64 = 1e-4;
 
 /// At most this many rays on which the engines disagree are kept for the JSON report.
 const MISMATCH_SAMPLES: usize = 8;
@@ -355,17 +365,47 @@ pub struct EngineResult {
     pub ties: f64,
     /// Rays in the frame.
     pub rays: u64,
-    /// A few rays that one engine hits and the other misses: pixel (row-major),
-    /// dpp's triangle and distance, the engine's.
+    /// Rays that one engine hits and the other misses, and how many of those
+    /// are at the border of the triangle that was hit (see [`BORDER_BAND`]).
+    pub one_sided: u64,
+    pub one_sided_at_border: u64,
+    /// A few rays that one engine hits and the other misses away from a
+    /// border: pixel (row-major), dpp's triangle and distance, the engine's.
     pub mismatches: Vec<(u32, u32, f32, u32, f32)>,
 }
 
 impl EngineResult {
     pub fn agrees(&self) -> bool {
-        let grazing = self.rays * GRAZING_RAYS_PER_MILLION / 1_000_000;
-        self.hits_dpp.abs_diff(self.hits_engine) <= grazing
+        let allowed = self.rays * ONE_SIDED_RAYS_PER_MILLION / 1_000_000;
+        self.one_sided - self.one_sided_at_border <= allowed
             && self.same_triangle + self.ties >= AGREEMENT
     }
+}
+
+/// Whether the ray of row-major `pixel` (WORKLOAD1's: one sample at the pixel
+/// centre) meets the plane of triangle `prim` within [`BORDER_BAND`] of the
+/// triangle's border, computed in f64; also true for a ray in the plane.
+#[cfg_attr(not(feature = "embree"), allow(dead_code))]
+fn ray_at_border(camera: &Camera, mesh: &TriangleMesh, pixel: usize, prim: u32) -> bool {
+    let Some(triangle) = mesh.triangles.get(prim as usize) else {
+        return false;
+    };
+    let (x, y) = (pixel as u32 % camera.width, pixel as u32 / camera.width);
+    let (sx, sy) = sample_offset(1, 0);
+    let origin = camera.eye.as_dvec3();
+    let dir = camera.direction(x, y, sx, sy).as_dvec3();
+    let [p0, p1, p2] = triangle.map(|v| mesh.positions[v as usize].as_dvec3());
+    // Möller–Trumbore's barycentric coordinates of the ray's point in the plane.
+    let (e1, e2) = (p1 - p0, p2 - p0);
+    let p = dir.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() <= f64::EPSILON * e1.length() * e2.length() {
+        return true;
+    }
+    let to_origin = origin - p0;
+    let u = to_origin.dot(p) / det;
+    let v = dir.dot(to_origin.cross(e1)) / det;
+    u.min(v).min(1.0 - u - v).abs() <= BORDER_BAND
 }
 
 /// WORKLOAD1's `prim` and `depth` outputs (row-major pixels).
@@ -531,9 +571,12 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                         &unfused, &swapped, &view, &pool, None, &args, &progress, true,
                     )?;
                     let prims = prims.expect("workload1 outputs prim and depth");
-                    view_result
-                        .engines
-                        .push(compare(engine, fused, unfused, dpp_prims, &prims));
+                    let at_border = |pixel: usize, prim: u32| {
+                        ray_at_border(&view.camera, &scene.mesh, pixel, prim)
+                    };
+                    view_result.engines.push(compare(
+                        engine, fused, unfused, dpp_prims, &prims, at_border,
+                    ));
                 }
             }
             let _ = (&embree, &dpp_prims);
@@ -576,12 +619,14 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         .filter(|(_, _, e)| !e.agrees())
         .map(|(s, v, e)| {
             format!(
-                "{} {}: {} hits {} rays, dpp {}; same triangle on {:.4}% of the rays, a tie on {:.4}%",
+                "{} {}: {} hits {} rays, dpp {}; {} rays hit in only one of them, {} of those at a triangle's border; same triangle on {:.4}% of the rays, a tie on {:.4}%",
                 s.name,
                 v.view,
                 e.engine.name(),
                 e.hits_engine,
                 e.hits_dpp,
+                e.one_sided,
+                e.one_sided_at_border,
                 100.0 * e.same_triangle,
                 100.0 * e.ties
             )
@@ -589,8 +634,8 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         .collect();
     if !disagreements.is_empty() {
         return Err(Failure::Run(format!(
-            "the engines' hits disagree (need equal hit counts, give or take {} ray(s) per million, and the same triangle or a tie on {}% of the rays):\n  {}",
-            GRAZING_RAYS_PER_MILLION,
+            "the engines' hits disagree (need every ray that only one of them hits to be at a triangle's border, give or take {} ray(s) per million, and the same triangle or a tie on {}% of the rays):\n  {}",
+            ONE_SIDED_RAYS_PER_MILLION,
             100.0 * AGREEMENT,
             disagreements.join("\n  ")
         )));
@@ -843,23 +888,32 @@ fn compare(
     unfused: Measurement,
     dpp: &Hits,
     other: &Hits,
+    at_border: impl Fn(usize, u32) -> bool,
 ) -> EngineResult {
     let hits = |h: &Hits| h.prim.iter().filter(|&&p| p != MISS_PRIM).count() as u64;
     let rays = dpp.prim.len();
     let comparable = rays > 0 && rays == other.prim.len() && rays == dpp.depth.len();
     let (mut same, mut ties) = (0usize, 0usize);
+    let (mut one_sided, mut one_sided_at_border) = (0u64, 0u64);
     let mut mismatches = Vec::new();
     for i in 0..rays.min(other.prim.len()) {
-        if (dpp.prim[i] == MISS_PRIM) != (other.prim[i] == MISS_PRIM)
-            && mismatches.len() < MISMATCH_SAMPLES
-        {
-            mismatches.push((
-                i as u32,
-                dpp.prim[i],
-                dpp.depth[i],
-                other.prim[i],
-                other.depth[i],
-            ));
+        let (dpp_hits, other_hits) = (dpp.prim[i] != MISS_PRIM, other.prim[i] != MISS_PRIM);
+        if dpp_hits == other_hits {
+            // Neither or both.
+        } else if at_border(i, if dpp_hits { dpp.prim[i] } else { other.prim[i] }) {
+            one_sided += 1;
+            one_sided_at_border += 1;
+        } else {
+            one_sided += 1;
+            if mismatches.len() < MISMATCH_SAMPLES {
+                mismatches.push((
+                    i as u32,
+                    dpp.prim[i],
+                    dpp.depth[i],
+                    other.prim[i],
+                    other.depth[i],
+                ));
+            }
         }
         if dpp.prim[i] == other.prim[i] {
             same += 1;
@@ -886,6 +940,8 @@ fn compare(
         same_triangle: share(same),
         ties: share(ties),
         rays: rays as u64,
+        one_sided,
+        one_sided_at_border,
         mismatches,
     }
 }
@@ -906,6 +962,7 @@ fn cpu_model() -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     #[test]
     fn scene_specs() {
@@ -951,27 +1008,82 @@ mod tests {
             depth: depth.clone(),
         };
         let engine = Engine::EmbreeSingle;
-        let result = compare(engine, m.clone(), m.clone(), &dpp, &dpp);
+        let nowhere = |_: usize, _: u32| false;
+        let result = compare(engine, m.clone(), m.clone(), &dpp, &dpp, nowhere);
         assert!(result.agrees());
         assert_eq!((result.same_triangle, result.ties), (1.0, 0.0));
         // Another triangle, farther away: 99.95% still agree.
         let mut other = Hits { prim, depth };
         other.prim[1] = 7;
         other.depth[1] = 9.0;
-        let result = compare(engine, m.clone(), m.clone(), &dpp, &other);
+        let result = compare(engine, m.clone(), m.clone(), &dpp, &other, nowhere);
         assert!(result.agrees());
         assert_eq!((result.same_triangle, result.ties), (0.9995, 0.0));
         // Many ties: different triangles at the same distance.
         for i in (2..400).filter(|i| i % 3 != 0) {
             other.prim[i] += 1;
         }
-        let result = compare(engine, m.clone(), m.clone(), &dpp, &other);
+        let result = compare(engine, m.clone(), m.clone(), &dpp, &other, nowhere);
         assert!(result.same_triangle < 0.9 && result.agrees());
         // A miss became a hit.
         other.prim[0] = 7;
         other.depth[0] = 7.0;
-        let result = compare(engine, m.clone(), m, &dpp, &other);
+        let result = compare(engine, m.clone(), m.clone(), &dpp, &other, nowhere);
         assert!(!result.agrees());
         assert_eq!(result.hits_engine, result.hits_dpp + 1);
+        assert_eq!((result.one_sided, result.one_sided_at_border), (1, 0));
+        assert_eq!(result.mismatches, vec![(0, miss, f32::INFINITY, 7, 7.0)]);
+        // ... at the border of the triangle it hit: they agree.
+        let at_border = |pixel: usize, prim: u32| (pixel, prim) == (0, 7);
+        let result = compare(engine, m.clone(), m, &dpp, &other, at_border);
+        assert!(result.agrees());
+        assert_eq!((result.one_sided, result.one_sided_at_border), (1, 1));
+        assert!(result.mismatches.is_empty());
+    }
+
+    #[test]
+    fn rays_at_a_triangles_border_are_told_from_rays_inside_and_outside() {
+        // The unit right triangle in z = 0, seen from above by a 3x3 camera
+        // whose centre pixel's ray runs down the z axis.
+        let mesh = TriangleMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            triangles: vec![[0, 1, 2]],
+            normals: None,
+            scalars: None,
+        };
+        let camera = |eye: Vec3| Camera::new(eye, eye - Vec3::Z, Vec3::Y, 10.0, 3, 3).unwrap();
+        let centre = 4;
+        // Through the hypotenuse, inside, outside, and through a vertex.
+        assert!(ray_at_border(
+            &camera(Vec3::new(0.5, 0.5, 1.0)),
+            &mesh,
+            centre,
+            0
+        ));
+        assert!(!ray_at_border(
+            &camera(Vec3::new(0.25, 0.25, 1.0)),
+            &mesh,
+            centre,
+            0
+        ));
+        assert!(!ray_at_border(
+            &camera(Vec3::new(0.6, 0.6, 1.0)),
+            &mesh,
+            centre,
+            0
+        ));
+        assert!(ray_at_border(
+            &camera(Vec3::new(0.0, 0.0, 1.0)),
+            &mesh,
+            centre,
+            0
+        ));
+        // A triangle the scene does not have.
+        assert!(!ray_at_border(
+            &camera(Vec3::new(0.5, 0.5, 1.0)),
+            &mesh,
+            centre,
+            1
+        ));
     }
 }

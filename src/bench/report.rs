@@ -194,7 +194,7 @@ impl Report {
                 md,
                 "## WORKLOAD1: dpp against Embree, `map<intersect>` Mrays/s\n"
             );
-            let _ = writeln!(md, "The same pipeline with Embree behind `intersect` (`rtcIntersect1` per ray, or `rtcIntersect16` packets). Ratio: dpp's rate over Embree's. Hits: rays that hit, dpp / Embree; same triangle: rays for which both name the same triangle or both miss, and (+) rays that hit different triangles at the same distance (overlapping triangles, a tie). They agree (✗ where not) when the hit counts are equal (give or take {} ray per million: a ray grazing an edge on the silhouette or the open border) and the two shares add up to {:.1}% or more.\n", super::GRAZING_RAYS_PER_MILLION, 100.0 * AGREEMENT);
+            let _ = writeln!(md, "The same pipeline with Embree behind `intersect` (`rtcIntersect1` per ray, or `rtcIntersect16` packets). Ratio: dpp's rate over Embree's. Hits: rays that hit, dpp / Embree; same triangle: rays for which both name the same triangle or both miss, and (+) rays that hit different triangles at the same distance (overlapping triangles, a tie). Where one engine hits a ray the other misses, the hits cell says how many such rays there were, and how many of them meet the hit triangle's plane at its border (within a ten-thousandth of its size, in f64: where the two watertight tests may round either way). They agree (✗ where not) when all such rays but {} per million are at a border and the two shares add up to {:.1}% or more.\n", super::ONE_SIDED_RAYS_PER_MILLION, 100.0 * AGREEMENT);
             let _ = writeln!(md, "| scene | view | dpp | Embree single | Embree packet | dpp / single | dpp / packet | hits (single) | hits (packet) | same triangle (single / packet) |");
             let _ = writeln!(
                 md,
@@ -217,8 +217,13 @@ impl Report {
                     let own_rate = mrays(view.rays, own);
                     let hits = |e: Option<&super::EngineResult>| {
                         e.map_or("–".into(), |e| {
+                            let one_sided = match (e.one_sided, e.one_sided_at_border) {
+                                (0, _) => String::new(),
+                                (n, b) if n == b => format!(" ({n} one-sided, all at a border)"),
+                                (n, b) => format!(" ({n} one-sided, {b} at a border)"),
+                            };
                             format!(
-                                "{} / {}{}",
+                                "{} / {}{one_sided}{}",
                                 e.hits_dpp,
                                 e.hits_engine,
                                 if e.agrees() { "" } else { " ✗" }
@@ -418,6 +423,8 @@ impl Report {
                                     "hits_engine": e.hits_engine,
                                     "same_triangle": e.same_triangle,
                                     "ties": e.ties,
+                                    "one_sided": e.one_sided,
+                                    "one_sided_at_border": e.one_sided_at_border,
                                     "hit_mismatches": e.mismatches.iter().map(|&(pixel, dpp_prim, dpp_t, prim, t)| json!({
                                         "x": pixel % report_width,
                                         "y": pixel / report_width,
