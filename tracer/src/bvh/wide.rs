@@ -802,19 +802,10 @@ fn watertight<T: Lanes, const KX: usize, const KY: usize, const KZ: usize>(
     let zero = lanes.splat(0.0);
     let exact_zeros = (lanes.eq(u, zero) | lanes.eq(v, zero) | lanes.eq(w, zero)) & valid;
     if exact_zeros != 0 {
-        let mut edges = [lanes.store_row(u), lanes.store_row(v), lanes.store_row(w)];
-        let sheared = [
-            lanes.store_row(ax),
-            lanes.store_row(ay),
-            lanes.store_row(bx),
-            lanes.store_row(by),
-            lanes.store_row(cx),
-            lanes.store_row(cy),
-        ];
-        redo_in_f64(exact_zeros, sheared, &mut edges);
-        u = lanes.load_row(&edges[0]);
-        v = lanes.load_row(&edges[1]);
-        w = lanes.load_row(&edges[2]);
+        // The scalar test re-evaluates all three in f64 where one is exactly zero.
+        u = lanes.select(exact_zeros, lanes.edge_in_f64(cx, cy, bx, by), u);
+        v = lanes.select(exact_zeros, lanes.edge_in_f64(ax, ay, cx, cy), v);
+        w = lanes.select(exact_zeros, lanes.edge_in_f64(bx, by, ax, ay), w);
     }
     let negative = lanes.lt(u, zero) | lanes.lt(v, zero) | lanes.lt(w, zero);
     let positive = lanes.gt(u, zero) | lanes.gt(v, zero) | lanes.gt(w, zero);
@@ -864,25 +855,6 @@ impl<T: Lanes> Crossing<T> {
             lanes.div(self.v, self.determinant),
             lanes.div(self.w, self.determinant),
         )
-    }
-}
-
-/// The scalar test's double-precision re-evaluation of all three edge functions,
-/// for the lanes where one of them came out exactly zero.
-#[cold]
-#[inline(never)]
-fn redo_in_f64(mut mask: u32, sheared: [[f32; GROUP]; 6], edges: &mut [[f32; GROUP]; 3]) {
-    let [ax, ay, bx, by, cx, cy] = sheared;
-    let [u, v, w] = edges;
-    let edge = |px: f32, py: f32, qx: f32, qy: f32| {
-        (f64::from(px) * f64::from(qy) - f64::from(py) * f64::from(qx)) as f32
-    };
-    while mask != 0 {
-        let lane = mask.trailing_zeros() as usize;
-        mask &= mask - 1;
-        u[lane] = edge(cx[lane], cy[lane], bx[lane], by[lane]);
-        v[lane] = edge(ax[lane], ay[lane], cx[lane], cy[lane]);
-        w[lane] = edge(bx[lane], by[lane], ax[lane], ay[lane]);
     }
 }
 
