@@ -1,6 +1,7 @@
 //! Indexed triangle meshes as the tracer receives them from a file or a generator.
 
 use glam::Vec3;
+use std::collections::HashMap;
 use thiserror::Error;
 
 /// A triangle mesh. Triangle `i` is the `i`-th triangle of the input after fan
@@ -155,6 +156,8 @@ impl TriangleMesh {
     /// vertex whose normals are within `crease` radians of its own face, and a
     /// vertex whose corners disagree is split into one vertex per normal (same
     /// position and scalar). Triangles keep their order and their positions.
+    /// Around a vertex with more than [`MAX_DIRECTIONS_AROUND_A_VERTEX`]
+    /// different face directions, corners keep their face's normal.
     pub fn add_crease_normals(&mut self, crease: f32) {
         let faces: Vec<Vec3> = (0..self.triangles.len())
             .map(|t| self.face_normal(t))
@@ -186,38 +189,27 @@ impl TriangleMesh {
             .map(|_| Vec::with_capacity(self.positions.len()));
         let mut normals = Vec::with_capacity(self.positions.len());
         let mut triangles = self.triangles.clone();
+        let mut directions = DirectionsAroundVertex::default();
         for vertex in 0..self.positions.len() {
             let around = &corners[starts[vertex]..starts[vertex + 1]];
-            let first_new = normals.len();
-            for &(t, c) in around {
-                let own = units[t as usize];
-                let sum: Vec3 = around
+            directions.smooth(
+                around
                     .iter()
-                    .map(|&(u, _)| u as usize)
-                    .filter(|&u| units[u].dot(own) >= cos_crease)
-                    .map(|u| faces[u])
-                    .sum();
-                let normal = if sum == Vec3::ZERO {
-                    own
-                } else {
-                    sum.normalize_or_zero()
-                };
-                // Corners with the same normal share one vertex.
-                let index = match normals[first_new..]
-                    .iter()
-                    .position(|n: &Vec3| *n == normal)
-                {
-                    Some(found) => first_new + found,
-                    None => {
-                        positions.push(self.positions[vertex]);
-                        if let (Some(new), Some(old)) = (scalars.as_mut(), self.scalars.as_ref()) {
-                            new.push(old[vertex]);
-                        }
-                        normals.push(normal);
-                        normals.len() - 1
-                    }
-                };
-                triangles[t as usize][c as usize] = index as u32;
+                    .map(|&(t, _)| (units[t as usize], faces[t as usize])),
+                cos_crease,
+            );
+            // One new vertex per distinct normal, in the order of the corners.
+            let first_new = normals.len() as u32;
+            for &normal in &directions.distinct_normals {
+                positions.push(self.positions[vertex]);
+                if let (Some(new), Some(old)) = (scalars.as_mut(), self.scalars.as_ref()) {
+                    new.push(old[vertex]);
+                }
+                normals.push(normal);
+            }
+            for (&(t, c), &group) in around.iter().zip(&directions.corner_group) {
+                triangles[t as usize][c as usize] =
+                    first_new + directions.distinct_of_group[group as usize];
             }
         }
         self.positions = positions;
@@ -225,6 +217,131 @@ impl TriangleMesh {
         self.normals = Some(normals);
         self.triangles = triangles;
     }
+}
+
+/// Around a vertex with more distinct face directions than this, each corner
+/// keeps its own face's normal: the crease test compares every pair of
+/// directions around a vertex, and a vertex shared by many thousands of
+/// differently oriented triangles (a finely divided cone's apex, a broken file
+/// that names one vertex in every face) would take quadratic time.
+pub const MAX_DIRECTIONS_AROUND_A_VERTEX: usize = 1024;
+
+/// The normals of the corners around one vertex, in buffers reused from vertex
+/// to vertex. Corners whose faces point exactly the same way form one group, so
+/// a fan of coplanar triangles (a disk's cap, however finely divided) costs
+/// time linear in its size.
+#[derive(Default)]
+struct DirectionsAroundVertex {
+    /// Groups are numbered in the order of their first corner.
+    directions: FirstAppearance,
+    corner_group: Vec<u32>,
+    /// Per group: its unit face direction, the sum of its faces' area-weighted
+    /// normals, and its corners' normal.
+    group_direction: Vec<Vec3>,
+    group_faces: Vec<Vec3>,
+    group_normal: Vec<Vec3>,
+    /// The different normals, in the order of their first corner, and which of
+    /// them each group takes.
+    normals: FirstAppearance,
+    distinct_normals: Vec<Vec3>,
+    distinct_of_group: Vec<u32>,
+}
+
+impl DirectionsAroundVertex {
+    /// Each corner, given as its face's unit normal and area-weighted normal, gets
+    /// the normalised sum of the area-weighted normals of the faces around the
+    /// vertex within the crease angle of its own (summed in the order of the
+    /// corners, group by group), or its own unit normal where that sum vanishes.
+    fn smooth(&mut self, corners: impl Iterator<Item = (Vec3, Vec3)>, cos_crease: f32) {
+        self.directions.clear();
+        self.corner_group.clear();
+        self.group_direction.clear();
+        self.group_faces.clear();
+        for (unit, face) in corners {
+            let group = self.directions.number(exact_key(unit));
+            if group as usize == self.group_direction.len() {
+                self.group_direction.push(unit);
+                self.group_faces.push(Vec3::ZERO);
+            }
+            self.group_faces[group as usize] += face;
+            self.corner_group.push(group);
+        }
+        let flat = self.group_direction.len() > MAX_DIRECTIONS_AROUND_A_VERTEX;
+        self.group_normal.clear();
+        for &own in &self.group_direction {
+            let sum: Vec3 = if flat {
+                Vec3::ZERO
+            } else {
+                self.group_direction
+                    .iter()
+                    .zip(&self.group_faces)
+                    .filter(|(unit, _)| unit.dot(own) >= cos_crease)
+                    .map(|(_, &faces)| faces)
+                    .sum()
+            };
+            self.group_normal.push(if sum == Vec3::ZERO {
+                own
+            } else {
+                sum.normalize_or_zero()
+            });
+        }
+        // Groups with equal normals share one vertex.
+        self.normals.clear();
+        self.distinct_normals.clear();
+        self.distinct_of_group.clear();
+        for &normal in &self.group_normal {
+            let distinct = self.normals.number(exact_key(normal));
+            if distinct as usize == self.distinct_normals.len() {
+                self.distinct_normals.push(normal);
+            }
+            self.distinct_of_group.push(distinct);
+        }
+    }
+}
+
+/// Numbers keys in the order they first appear: an equal key seen before gets
+/// its number, a new one the next. A linear search while there are few (most
+/// vertices have about six corners), a hash map beyond.
+#[derive(Default)]
+struct FirstAppearance {
+    keys: Vec<[u32; 3]>,
+    numbers: HashMap<[u32; 3], u32>,
+}
+
+impl FirstAppearance {
+    const LINEAR_SEARCH_UP_TO: usize = 16;
+
+    fn clear(&mut self) {
+        self.keys.clear();
+        if !self.numbers.is_empty() {
+            // Not `clear`: that costs the map's whole capacity at every vertex.
+            self.numbers = HashMap::new();
+        }
+    }
+
+    fn number(&mut self, key: [u32; 3]) -> u32 {
+        let next = self.keys.len() as u32;
+        if self.keys.len() <= Self::LINEAR_SEARCH_UP_TO {
+            if let Some(found) = self.keys.iter().position(|&seen| seen == key) {
+                return found as u32;
+            }
+            self.keys.push(key);
+            if self.keys.len() > Self::LINEAR_SEARCH_UP_TO {
+                self.numbers = (self.keys.iter().copied()).zip(0..).collect();
+            }
+            return next;
+        }
+        let keys = &mut self.keys;
+        *self.numbers.entry(key).or_insert_with(|| {
+            keys.push(key);
+            next
+        })
+    }
+}
+
+/// A vector's bits with `-0.0` read as `0.0`, so that equal vectors have equal keys.
+fn exact_key(vector: Vec3) -> [u32; 3] {
+    (vector + Vec3::ZERO).to_array().map(f32::to_bits)
 }
 
 #[cfg(test)]
@@ -334,6 +451,96 @@ mod tests {
             "{} vs {expected}",
             normals[0]
         );
+    }
+
+    /// A cone of `segments` triangles around its apex (vertex 0), over a unit
+    /// circle at height -1, and, when `cap`, a planar cap fanned around its
+    /// centre (the last vertex).
+    fn cone(segments: u32, cap: bool) -> TriangleMesh {
+        let rim = |i: u32| {
+            let angle = std::f32::consts::TAU * i as f32 / segments as f32;
+            Vec3::new(angle.cos(), -1.0, angle.sin())
+        };
+        let mut positions = vec![Vec3::ZERO];
+        positions.extend((0..segments).map(rim));
+        let next = |i: u32| 1 + (i + 1) % segments;
+        let mut triangles: Vec<[u32; 3]> = (0..segments).map(|i| [0, next(i), 1 + i]).collect();
+        if cap {
+            positions.push(Vec3::new(0.0, -1.0, 0.0));
+            triangles.extend((0..segments).map(|i| [segments + 1, 1 + i, next(i)]));
+        }
+        TriangleMesh {
+            positions,
+            triangles,
+            normals: None,
+            scalars: None,
+        }
+    }
+
+    #[test]
+    fn crease_normals_of_a_finely_fanned_cap_are_its_plane() {
+        // 200,000 coplanar triangles around the cap's centre: one direction, so
+        // linear time (comparing every pair of corners would take minutes).
+        let segments = 200_000;
+        let mut mesh = cone(segments, true);
+        mesh.add_crease_normals(60f32.to_radians());
+        let normals = mesh.normals.as_ref().unwrap();
+        let at_centre: Vec<u32> = mesh.triangles[segments as usize..]
+            .iter()
+            .map(|triangle| triangle[0])
+            .collect();
+        assert!(at_centre.iter().all(|&v| v == at_centre[0]), "one vertex");
+        assert_eq!(
+            mesh.positions[at_centre[0] as usize],
+            Vec3::new(0.0, -1.0, 0.0)
+        );
+        assert!((normals[at_centre[0] as usize] - Vec3::NEG_Y).length() < 1e-6);
+        // Where the thin sides meet, at the apex, there are too many directions:
+        // each corner keeps its face's normal.
+        for (t, triangle) in mesh.triangles[..segments as usize].iter().enumerate() {
+            let face = mesh.face_normal(t).normalize();
+            assert_eq!(normals[triangle[0] as usize], face);
+        }
+    }
+
+    #[test]
+    fn corners_keep_their_faces_around_a_vertex_of_too_many_directions() {
+        let limit = MAX_DIRECTIONS_AROUND_A_VERTEX as u32;
+        for (segments, flat) in [(limit, false), (limit + 1, true)] {
+            let mut mesh = cone(segments, false);
+            mesh.add_crease_normals(60f32.to_radians());
+            let normals = mesh.normals.as_ref().unwrap();
+            let apex: Vec<usize> = mesh.triangles.iter().map(|t| t[0] as usize).collect();
+            if flat {
+                for (t, &vertex) in apex.iter().enumerate() {
+                    let face = mesh.face_normal(t).normalize();
+                    assert!((normals[vertex] - face).length() < 1e-6);
+                }
+            } else {
+                // Every face within 60 degrees is averaged in: each corner's
+                // normal leans from its face towards the axis.
+                for (t, &vertex) in apex.iter().enumerate() {
+                    let face = mesh.face_normal(t).normalize();
+                    assert!(normals[vertex].y > face.y + 0.1, "{segments}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn keys_are_numbered_by_first_appearance_before_and_after_the_map() {
+        let mut numbering = FirstAppearance::default();
+        for round in 0..2 {
+            numbering.clear();
+            // 40 different keys, each given twice, the repeats three keys late.
+            let keys: Vec<[u32; 3]> = (0..40).map(|i| [i, round, 7]).collect();
+            for (i, &key) in keys.iter().enumerate() {
+                assert_eq!(numbering.number(key), i as u32);
+                if i >= 3 {
+                    assert_eq!(numbering.number(keys[i - 3]), i as u32 - 3);
+                }
+            }
+        }
     }
 
     #[test]
