@@ -175,17 +175,29 @@ fn scene_file(request: &SceneRequest) -> Option<PathBuf> {
     beside.exists().then_some(beside)
 }
 
-/// A standard view of the scene's bounds, with any of eye, look-at and up replaced.
+/// A standard view of the scene's bounds, with any of eye, look-at and up
+/// replaced. With both eye and look-at given no standard view is needed (a
+/// scene too large for one can still be seen).
 fn camera(request: &SceneRequest, scene: &TraceScene) -> Result<Camera, String> {
     let view: StandardView = request.view.parse().map_err(|e| format!("{e}"))?;
     let (width, height) = request.size;
-    let standard =
-        Camera::standard(view, &scene.bounds, width, height).map_err(|e| e.to_string())?;
     let pick = |given: Option<[f32; 3]>, default: Vec3| given.map_or(default, Vec3::from);
+    let (eye, look_at, up) = match (request.eye, request.look_at) {
+        (Some(eye), Some(look_at)) => (Vec3::from(eye), Vec3::from(look_at), Vec3::Y),
+        _ => {
+            let standard =
+                Camera::standard(view, &scene.bounds, width, height).map_err(|e| e.to_string())?;
+            (
+                pick(request.eye, standard.eye),
+                pick(request.look_at, standard.look_at),
+                standard.up,
+            )
+        }
+    };
     Camera::new(
-        pick(request.eye, standard.eye),
-        pick(request.look_at, standard.look_at),
-        pick(request.up, standard.up),
+        eye,
+        look_at,
+        pick(request.up, up),
         request.fov,
         width,
         height,

@@ -29,6 +29,11 @@ pub enum CameraError {
     UnsupportedSamplesPerPixel(u32),
     #[error("unknown view `{0}`; the standard views are front, back and zoom")]
     UnknownView(String),
+    #[error(
+        "the scene's bounding box ({min:?} to {max:?}) is too large for a standard view: \
+         its size overflows f32 (set the camera with --eye and --look-at)"
+    )]
+    SceneTooLarge { min: Vec3, max: Vec3 },
 }
 
 /// The standard views of §7.
@@ -62,12 +67,12 @@ pub struct Camera {
     pub fov_degrees: f32,
     pub width: u32,
     pub height: u32,
-    forward: Vec3,
-    right: Vec3,
-    true_up: Vec3,
+    pub(crate) forward: Vec3,
+    pub(crate) right: Vec3,
+    pub(crate) true_up: Vec3,
     /// `tan(fov / 2)`.
-    half_height: f32,
-    aspect: f32,
+    pub(crate) half_height: f32,
+    pub(crate) aspect: f32,
 }
 
 impl Camera {
@@ -91,11 +96,15 @@ impl Camera {
         if !(eye.is_finite() && look_at.is_finite() && up.is_finite()) {
             return Err(CameraError::NonFinite { eye, look_at, up });
         }
-        let forward = (look_at - eye).normalize_or_zero();
+        let towards = look_at - eye;
+        if !towards.is_finite() {
+            return Err(CameraError::NonFinite { eye, look_at, up });
+        }
+        let forward = unit_without_overflow(towards);
         if forward == Vec3::ZERO {
             return Err(CameraError::EyeAtTarget(eye));
         }
-        let right = forward.cross(up).normalize_or_zero();
+        let right = unit_without_overflow(forward.cross(up));
         if right == Vec3::ZERO {
             return Err(CameraError::UpParallelToForward { up, forward });
         }
@@ -129,7 +138,14 @@ impl Camera {
             StandardView::Back => Vec3::new(0.0, 0.0, -diagonal),
             StandardView::Zoom => Vec3::new(0.0, 0.0, 0.35 * diagonal),
         };
-        Camera::new(center + offset, center, Vec3::Y, 45.0, width, height)
+        let eye = center + offset;
+        if !(center.is_finite() && eye.is_finite()) {
+            return Err(CameraError::SceneTooLarge {
+                min: bounds.min,
+                max: bounds.max,
+            });
+        }
+        Camera::new(eye, center, Vec3::Y, 45.0, width, height)
     }
 
     pub fn pixels(&self) -> u32 {
@@ -147,6 +163,17 @@ impl Camera {
             + vertical * self.half_height * self.true_up)
             .normalize()
     }
+}
+
+/// `v` over its length; where squaring its components overflows (a camera 1e30
+/// from its target) or underflows, scaled by its largest component first. Zero
+/// for the zero vector.
+fn unit_without_overflow(v: Vec3) -> Vec3 {
+    let unit = v.normalize_or_zero();
+    if unit != Vec3::ZERO || v == Vec3::ZERO {
+        return unit;
+    }
+    (v / v.abs().max_element()).normalize_or_zero()
 }
 
 /// The offset inside its pixel of sample `sample` of `samples_per_pixel` (§7):
@@ -359,6 +386,18 @@ mod tests {
         let zoom = Camera::standard("zoom".parse().unwrap(), &bounds, 8, 8).unwrap();
         assert_eq!(zoom.eye, c + Vec3::new(0.0, 0.0, 0.35 * d));
         assert!("side".parse::<StandardView>().is_err());
+        // Far-apart eye and target (their distance squared overflows f32) still
+        // make a camera; a box whose size overflows f32 has no standard view.
+        let far = Camera::new(Vec3::new(0.0, 0.0, 3e30), Vec3::ZERO, Vec3::Y, 45.0, 8, 8).unwrap();
+        assert_eq!(far.direction(4, 4, 0.0, 0.0), Vec3::NEG_Z);
+        let huge = Bounds {
+            min: Vec3::ZERO,
+            max: Vec3::new(1e30, 1e30, 1e30),
+        };
+        assert!(matches!(
+            Camera::standard(StandardView::Front, &huge, 8, 8),
+            Err(CameraError::SceneTooLarge { .. })
+        ));
     }
 
     #[test]
