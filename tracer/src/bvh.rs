@@ -91,8 +91,42 @@ pub struct Bvh {
     triangles: Vec<BvhTriangle>,
     triangle_ids: Vec<u32>,
     stack_depth: usize,
+    /// The power of two the stored vertices are multiplied by (1 for most
+    /// scenes; see [`bvh_space_scale`]); rays enter multiplied by it too.
+    scale: f32,
     /// The CPU's traversal structure, built from the fields above.
     wide: wide::WideBvh,
+}
+
+/// Coordinates whose largest magnitude lies in `2^-20 ..= 2^20` are traced as
+/// they are; others are scaled by a power of two into `1 .. 2`.
+const UNSCALED_EXPONENTS: std::ops::RangeInclusive<i32> = -20..=20;
+
+/// The power of two that brings a mesh's largest coordinate magnitude into
+/// `1 .. 2` when it lies far from 1. The watertight test multiplies three
+/// coordinates together (its distance is a cubic), which overflows f32 for
+/// scenes larger than about 1e12 and loses everything to underflow below
+/// about 1e-13: such scenes would silently miss. Multiplying vertices, ray
+/// origins and `tmax` by a power of two scales every intermediate result of
+/// the box and triangle tests exactly, so the traversal visits the same nodes
+/// and finds the same triangle, `u` and `v`, and `t` times the scale, which
+/// [`Bvh::hit_record`] divides out exactly.
+fn bvh_space_scale(mesh: &TriangleMesh) -> f32 {
+    let Some(bounds) = mesh.bounds() else {
+        return 1.0;
+    };
+    let largest = bounds.min.abs().max(bounds.max.abs()).max_element();
+    if largest == 0.0 {
+        return 1.0;
+    }
+    // The exponent of `largest`, read from its bits (subnormals count as -127).
+    let exponent = ((largest.to_bits() >> 23) & 0xff) as i32 - 127;
+    if UNSCALED_EXPONENTS.contains(&exponent) {
+        return 1.0;
+    }
+    // 2^-exponent, kept a normal f32 whose reciprocal is one too.
+    let scale_exponent = (-exponent).clamp(-126, 126);
+    f32::from_bits(((127 + scale_exponent) as u32) << 23)
 }
 
 impl Bvh {
@@ -101,6 +135,23 @@ impl Bvh {
     /// [`MAX_STACK_DEPTH`], falls back to a balanced median-split tree.
     pub fn build(mesh: &TriangleMesh) -> Result<Bvh, MeshError> {
         mesh.validate()?;
+        let scale = bvh_space_scale(mesh);
+        let mut bvh = if scale == 1.0 {
+            Bvh::build_unscaled(mesh)
+        } else {
+            Bvh::build_unscaled(&TriangleMesh {
+                positions: mesh.positions.iter().map(|&p| p * scale).collect(),
+                triangles: mesh.triangles.clone(),
+                normals: None,
+                scalars: None,
+            })
+        };
+        bvh.scale = scale;
+        Ok(bvh)
+    }
+
+    /// [`Bvh::build`] of a mesh whose coordinates need no scaling.
+    fn build_unscaled(mesh: &TriangleMesh) -> Bvh {
         let triangles: Vec<Triangle> = (0..mesh.triangles.len())
             .map(|i| {
                 let [v0, v1, v2] = mesh.triangle_vertices(i).map(Vec3A::from);
@@ -115,9 +166,9 @@ impl Bvh {
         );
         let bvh = flatten(&tree.nodes, &tree.primitive_indices, mesh);
         if bvh.stack_depth <= MAX_STACK_DEPTH {
-            Ok(bvh)
+            bvh
         } else {
-            Ok(Bvh::build_median_split(mesh))
+            Bvh::build_median_split(mesh)
         }
     }
 
@@ -162,7 +213,7 @@ impl Bvh {
         &self.nodes
     }
 
-    /// Triangle vertices in leaf order.
+    /// Triangle vertices in leaf order, multiplied by [`Bvh::scale`].
     pub fn triangles(&self) -> &[BvhTriangle] {
         &self.triangles
     }
@@ -170,6 +221,25 @@ impl Bvh {
     /// Input-file triangle index of each leaf-order triangle.
     pub fn triangle_ids(&self) -> &[u32] {
         &self.triangle_ids
+    }
+
+    /// The power of two that node boxes and [`Bvh::triangles`] are multiplied by
+    /// (1 unless the scene's coordinates are very large or very small); every
+    /// traversal multiplies ray origins and `tmax` by it on entry and divides
+    /// hit distances by it.
+    pub fn scale(&self) -> f32 {
+        self.scale
+    }
+
+    /// A ray as the traversal sees it: origin and `tmax` times [`Bvh::scale`]
+    /// (the direction is left alone, so `t` scales too).
+    #[inline]
+    fn to_bvh_space(&self, ray: &Ray) -> Ray {
+        Ray {
+            origin: ray.origin * self.scale,
+            direction: ray.direction,
+            tmax: ray.tmax * self.scale,
+        }
     }
 
     /// The most stack entries a traversal of this tree can need (≤ [`MAX_STACK_DEPTH`]).
@@ -262,8 +332,10 @@ impl Bvh {
 
     #[inline]
     fn hit_record(&self, found: wide::Found) -> Option<HitRecord> {
+        // Exact: the scale is a power of two whose reciprocal is a normal f32.
+        let inverse_scale = 1.0 / self.scale;
         found.map(|(leaf_triangle, t, u, v)| HitRecord {
-            t,
+            t: t * inverse_scale,
             prim: self.triangle_ids[leaf_triangle],
             u,
             v,
@@ -274,6 +346,7 @@ impl Bvh {
     /// permutation is a compile-time constant (no indexing in the inner loop).
     #[inline]
     fn traverse<const ANY_HIT: bool>(&self, ray: &Ray) -> Option<(usize, f32, f32, f32)> {
+        let ray = &self.to_bvh_space(ray);
         let d = ray.direction.abs();
         if d.x >= d.y && d.x >= d.z {
             self.traverse_axes::<1, 2, 0, ANY_HIT>(ray)
@@ -495,6 +568,7 @@ fn flatten(source: &[Bvh2Node], primitive_indices: &[u32], mesh: &TriangleMesh) 
         triangles: Vec::with_capacity(primitive_indices.len()),
         triangle_ids: Vec::with_capacity(primitive_indices.len()),
         stack_depth: 1,
+        scale: 1.0,
         wide: wide::WideBvh::default(),
     };
     let append_leaf = |bvh: &mut Bvh, node: &Bvh2Node, first: u32, count: u32| {

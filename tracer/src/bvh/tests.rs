@@ -960,3 +960,47 @@ fn a_million_rays_at_vertices_and_edges_never_leak() {
     }
     assert!(total >= 1_000_000, "{total}");
 }
+
+#[test]
+fn very_large_and_very_small_scenes_trace_like_a_unit_scene() {
+    // The same soup and rays at 2^50 (1e15) and 2^-47 (7e-15) times the size,
+    // directions unchanged (so t scales too): unscaled, the triangle test's
+    // cubic products overflow or underflow there and rays miss. Powers of two
+    // scale every rounding exactly, so the hits must be the same triangles, u
+    // and v, at exactly `factor` times the distance.
+    let mut random = SplitMix64::new(11);
+    let mesh = random_soup(&mut random, 2000);
+    let rays: Vec<Ray> = random_rays(&mut random, 3000, &mesh)
+        .into_iter()
+        .map(|ray| Ray {
+            direction: ray.direction.normalize(),
+            ..ray
+        })
+        .collect();
+    let unit = Bvh::build(&mesh).unwrap();
+    assert_eq!(unit.scale(), 1.0);
+    let unit_hits: Vec<_> = rays.iter().map(|ray| unit.intersect_closest(ray)).collect();
+    assert!(unit_hits.iter().filter(|hit| hit.is_some()).count() > 1000);
+    for factor in [2f32.powi(50), 2f32.powi(-47)] {
+        let scaled = TriangleMesh {
+            positions: mesh.positions.iter().map(|&p| p * factor).collect(),
+            ..mesh.clone()
+        };
+        let bvh = Bvh::build(&scaled).unwrap();
+        assert_ne!(bvh.scale(), 1.0);
+        for (ray, unit_hit) in rays.iter().zip(&unit_hits) {
+            let ray = Ray {
+                origin: ray.origin * factor,
+                direction: ray.direction,
+                tmax: ray.tmax * factor,
+            };
+            let expected = unit_hit.map(|hit| HitRecord {
+                t: hit.t * factor,
+                ..hit
+            });
+            assert_eq!(bvh.intersect_closest(&ray), expected, "{factor}: {ray:?}");
+            assert_eq!(bvh.intersect_closest_binary(&ray), expected);
+            assert_eq!(bvh.occluded(&ray, ray.tmax), expected.is_some());
+        }
+    }
+}

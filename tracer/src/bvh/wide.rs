@@ -306,6 +306,7 @@ pub(super) fn trace_batch<const ANY_HIT: bool>(
     ray: impl Fn(usize) -> Ray,
     sink: impl FnMut(Found),
 ) {
+    let ray = |index| bvh.to_bvh_space(&ray(index));
     match isa {
         #[cfg(target_arch = "x86_64")]
         Isa::Avx512 => {

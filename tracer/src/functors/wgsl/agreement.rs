@@ -15,6 +15,7 @@ use crate::functors::test_support::{
     hit_column, ray, ray_column, read_surfaces, surface_column, Fixture,
 };
 use crate::functors::{RayRecord, SurfaceRecord};
+use crate::mesh::TriangleMesh;
 use crate::scene::TraceScene;
 use crate::shading::{Material, MeshMaterials, PointLight};
 use crate::volume::Volume;
@@ -1624,11 +1625,24 @@ fn divides_exactly(gpu: &GpuContext) -> bool {
 /// CPU's million-ray version: `a_million_rays_at_vertices_and_edges_never_leak`.)
 #[test]
 fn rays_at_a_closed_meshs_vertices_and_edges_all_hit_on_the_gpu() {
+    // At the unit cube's size, and at 2^50 (1e15) and 2^-47 (7e-15) times it
+    // with the directions left at the unit cube's (so t scales too), where the
+    // triangle test's products overflow or underflow unless the BVH rescales.
+    for factor in [1.0, 2f32.powi(50), 2f32.powi(-47)] {
+        rays_at_a_closed_meshs_vertices_and_edges_all_hit_on_the_gpu_at(factor);
+    }
+}
+
+fn rays_at_a_closed_meshs_vertices_and_edges_all_hit_on_the_gpu_at(factor: f32) {
     use crate::test_meshes::{box_outward, subdivided_cube, vertex_and_edge_targets};
     let mesh = subdivided_cube(6);
     let bounds = mesh.bounds().unwrap();
     let targets = vertex_and_edge_targets(&mesh);
-    let scene = TraceScene::new(mesh).unwrap();
+    let scaled = TriangleMesh {
+        positions: mesh.positions.iter().map(|&p| p * factor).collect(),
+        ..mesh
+    };
+    let scene = TraceScene::new(scaled).unwrap();
     let env = Env::trace("cube", Fixture::with_scene(scene), None);
     let Some(gpu) = gpu_for_tests() else { return };
     let mut random = crate::random::SplitMix64::new(23);
@@ -1643,8 +1657,14 @@ fn rays_at_a_closed_meshs_vertices_and_edges_all_hit_on_the_gpu() {
             );
             let away = (outward + 0.35 * tilt.normalize_or_zero()).normalize();
             let origin = target + random.range(3.0, 12.0) * away;
-            // tmax just past the target: any-hit rays must stop there.
-            rays.push(ray(origin, target - origin, 1.0 + 1e-5, 0));
+            // Scaling by a power of two keeps the ray through the scaled
+            // target; tmax just past it: any-hit rays must stop there.
+            rays.push(ray(
+                origin * factor,
+                target - origin,
+                (1.0 + 1e-5) * factor,
+                0,
+            ));
         }
     }
     let rays = env.rays(&rays);
@@ -1664,7 +1684,7 @@ fn rays_at_a_closed_meshs_vertices_and_edges_all_hit_on_the_gpu() {
         };
         assert!(
             leaks.is_empty(),
-            "`{functor}`: {} of {} rays aimed at vertices and edges leak on the GPU, e.g. {}",
+            "`{functor}` at {factor} times the size: {} of {} rays aimed at vertices and edges leak on the GPU, e.g. {}",
             leaks.len(),
             rays.len(),
             leaks

@@ -55,6 +55,8 @@ pub struct SceneGpuBuffers {
     pub bvh_triangle_ids: GpuBuffer,
     pub mesh_triangles: GpuBuffer,
     pub mesh_vertices: GpuBuffer,
+    /// [`Bvh::scale`]: the BVH's boxes and triangles are multiplied by it.
+    pub bvh_scale: f32,
 }
 
 impl SceneGpuBuffers {
@@ -96,6 +98,7 @@ impl SceneGpuBuffers {
             ),
             mesh_triangles: buffer("tracer_mesh_triangles", "array<vec4<u32>>", mesh_triangles),
             mesh_vertices: buffer("tracer_mesh_vertices", "array<vec4<f32>>", mesh_vertices),
+            bvh_scale: bvh.scale(),
         }
     }
 }
@@ -150,9 +153,8 @@ impl ShadingGpuBuffers {
     }
 }
 
-/// The camera's frame as [`Camera::new`] computes it (its fields are private;
-/// the same glam operations on the same inputs give the same bits, which a
-/// test checks through [`Camera::direction`]).
+/// The camera's frame, as [`Camera::new`] computed it (a test checks through
+/// [`Camera::direction`] that the twin's order of operations gives its bits).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CameraFrame {
     pub forward: Vec3,
@@ -164,14 +166,12 @@ pub struct CameraFrame {
 
 impl CameraFrame {
     pub fn new(camera: &Camera) -> CameraFrame {
-        let forward = (camera.look_at - camera.eye).normalize_or_zero();
-        let right = forward.cross(camera.up).normalize_or_zero();
         CameraFrame {
-            forward,
-            right,
-            true_up: right.cross(forward),
-            half_height: (camera.fov_degrees.to_radians() * 0.5).tan(),
-            aspect: camera.width as f32 / camera.height as f32,
+            forward: camera.forward,
+            right: camera.right,
+            true_up: camera.true_up,
+            half_height: camera.half_height,
+            aspect: camera.aspect,
         }
     }
 

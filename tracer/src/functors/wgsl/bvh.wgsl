@@ -4,7 +4,8 @@
 // closest hit (of hits at exactly the same distance, the lowest leaf-order
 // triangle, whatever the order of visits). Needs
 // `tracer_vector`. Constants from Rust are prepended:
-// TRACER_BVH_MAX_STACK_DEPTH (u32), TRACER_BVH_ROBUST_FAR_SCALE (f32).
+// TRACER_BVH_MAX_STACK_DEPTH (u32), TRACER_BVH_ROBUST_FAR_SCALE (f32), and the
+// scene's TRACER_BVH_SCALE and TRACER_BVH_INVERSE_SCALE (f32).
 //
 // Buffers (tracer/src/functors/wgsl/buffers.rs):
 // - tracer_bvh_nodes: array<vec4<f32>>, 4 per node: per child (left, then
@@ -155,8 +156,10 @@ fn tracer_bvh_intersect_triangle(ray: TracerBvhRay, index: u32, tmax: f32, up_to
 
 // The closest hit with `0 < t < tmax` or, with `any_hit`, the first one found.
 fn tracer_bvh_traverse(origin: vec3<f32>, direction: vec3<f32>, tmax: f32, any_hit: bool) -> TracerBvhHit {
-    let ray = tracer_bvh_prepare(origin, direction);
-    var closest = tmax;
+    // The stored vertices are multiplied by a power of two (`Bvh::scale`): so
+    // are the origin and tmax, and hit distances are divided back, exactly.
+    let ray = tracer_bvh_prepare(origin * TRACER_BVH_SCALE, direction);
+    var closest = tmax * TRACER_BVH_SCALE;
     var found = false;
     var best_triangle = 0u;
     var best_t = 0.0;
@@ -210,7 +213,7 @@ fn tracer_bvh_traverse(origin: vec3<f32>, direction: vec3<f32>, tmax: f32, any_h
                     best_u = hit.u;
                     best_v = hit.v;
                     if (any_hit) {
-                        return TracerBvhHit(true, false, best_t, best_u, best_v, tracer_bvh_triangle_ids[best_triangle]);
+                        return TracerBvhHit(true, false, best_t * TRACER_BVH_INVERSE_SCALE, best_u, best_v, tracer_bvh_triangle_ids[best_triangle]);
                     }
                     closest = hit.t;
                 }
@@ -248,5 +251,5 @@ fn tracer_bvh_traverse(origin: vec3<f32>, direction: vec3<f32>, tmax: f32, any_h
     if (!found) {
         return TracerBvhHit(false, false, 0.0, 0.0, 0.0, 0u);
     }
-    return TracerBvhHit(true, false, best_t, best_u, best_v, tracer_bvh_triangle_ids[best_triangle]);
+    return TracerBvhHit(true, false, best_t * TRACER_BVH_INVERSE_SCALE, best_u, best_v, tracer_bvh_triangle_ids[best_triangle]);
 }

@@ -142,22 +142,32 @@ pub(crate) fn surface_module() -> WgslModule {
 /// `tracer_bvh`: the CPU's traversal and triangle test (needs `tracer_vector`).
 pub(crate) fn bvh_module(scene: &SceneGpuBuffers) -> WgslModule {
     static SOURCE: OnceLock<String> = OnceLock::new();
+    // The scene's own constants, then the cached rest.
+    let scale = scene.bvh_scale;
+    let scene_constants = format!(
+        "const TRACER_BVH_SCALE: f32 = {};\nconst TRACER_BVH_INVERSE_SCALE: f32 = {};\n",
+        f32_literal(scale),
+        f32_literal(1.0 / scale)
+    );
     WgslModule {
         name: "tracer_bvh",
-        source: module_source(&SOURCE, include_str!("bvh.wgsl"), || {
-            vec![
-                (
-                    "TRACER_BVH_MAX_STACK_DEPTH",
-                    "u32",
-                    format!("{}u", Bvh::gpu_max_stack_depth()),
-                ),
-                (
-                    "TRACER_BVH_ROBUST_FAR_SCALE",
-                    "f32",
-                    f32_literal(Bvh::gpu_robust_far_scale()),
-                ),
-            ]
-        }),
+        source: Cow::Owned(
+            scene_constants
+                + &module_source(&SOURCE, include_str!("bvh.wgsl"), || {
+                    vec![
+                        (
+                            "TRACER_BVH_MAX_STACK_DEPTH",
+                            "u32",
+                            format!("{}u", Bvh::gpu_max_stack_depth()),
+                        ),
+                        (
+                            "TRACER_BVH_ROBUST_FAR_SCALE",
+                            "f32",
+                            f32_literal(Bvh::gpu_robust_far_scale()),
+                        ),
+                    ]
+                }),
+        ),
         buffers: vec![
             scene.bvh_nodes.clone(),
             scene.bvh_triangles.clone(),
