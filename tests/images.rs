@@ -364,3 +364,61 @@ fn a_transparent_background_is_clear_where_rays_miss() {
     assert_eq!(image.get_pixel(0, 0)[3], 0, "a corner misses the scene");
     assert_eq!(image.get_pixel(32, 18)[3], 255, "the centre sees it");
 }
+
+/// Comma-separated numbers with the first three (at most) times `factor`.
+fn scaled_numbers(text: &str, factor: f32) -> String {
+    text.split(',')
+        .enumerate()
+        .map(|(i, n)| {
+            let n: f32 = n.parse().unwrap();
+            if i < 3 {
+                format!("{:?}", n * factor)
+            } else {
+                n.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+#[test]
+fn the_scene_at_1e15_and_1e_minus_14_times_its_size_renders_the_same_image() {
+    // Squared lengths of edges, cross products and distances overflow or
+    // underflow f32 at these sizes: the BVH traces at a power-of-two scale
+    // and normals are taken with a rescaled length. Scaling the scene, the
+    // camera, the light and the scalar range by a power of two must give the
+    // image of the unit-size scene (WORKLOAD3: shading, shadows, ambient
+    // occlusion and reflections).
+    let dir = scene_dir();
+    let reference = small_scene(dir.path(), "workload3.dpp", "64x48", &[]);
+    for factor in [2f32.powi(50), 2f32.powi(-47)] {
+        let obj: String = common::SCENE_OBJ
+            .lines()
+            .map(|line| match line.strip_prefix("v ") {
+                Some(xyz) => {
+                    let scaled = scaled_numbers(&xyz.replace(' ', ","), factor);
+                    format!("v {}\n", scaled.replace(',', " "))
+                }
+                None => format!("{}\n", line.replace("scene.mtl", "scaled.mtl")),
+            })
+            .collect();
+        std::fs::write(dir.path().join("scaled.obj"), obj).unwrap();
+        std::fs::copy(dir.path().join("scene.mtl"), dir.path().join("scaled.mtl")).unwrap();
+        let mut args: Vec<String> = vec!["scaled.obj".into(), "--size".into(), "64x48".into()];
+        for &arg in SCENE_VIEW {
+            // Points and the scalar range (`--light` keeps its intensity).
+            args.push(match arg.split_once('=') {
+                Some((option, numbers)) => format!("{option}={}", scaled_numbers(numbers, factor)),
+                None if arg.contains(',') => scaled_numbers(arg, factor),
+                None => arg.to_string(),
+            });
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let image = render(dir.path(), "workload3.dpp", &args);
+        let error = mean_flip(&reference, &image);
+        assert!(
+            error <= GOLDEN_TOLERANCE,
+            "{factor} times the size: mean FLIP {error}"
+        );
+    }
+}

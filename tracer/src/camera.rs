@@ -1,6 +1,7 @@
 //! The pinhole camera of the language spec (§7) and the Morton order of its pixels.
 
 use crate::mesh::Bounds;
+use crate::vector::unit_or_zero;
 use glam::Vec3;
 use std::str::FromStr;
 use thiserror::Error;
@@ -100,11 +101,11 @@ impl Camera {
         if !towards.is_finite() {
             return Err(CameraError::NonFinite { eye, look_at, up });
         }
-        let forward = unit_without_overflow(towards);
+        let forward = unit_or_zero(towards);
         if forward == Vec3::ZERO {
             return Err(CameraError::EyeAtTarget(eye));
         }
-        let right = unit_without_overflow(forward.cross(up));
+        let right = unit_or_zero(forward.cross(up));
         if right == Vec3::ZERO {
             return Err(CameraError::UpParallelToForward { up, forward });
         }
@@ -163,17 +164,6 @@ impl Camera {
             + vertical * self.half_height * self.true_up)
             .normalize()
     }
-}
-
-/// `v` over its length; where squaring its components overflows (a camera 1e30
-/// from its target) or underflows, scaled by its largest component first. Zero
-/// for the zero vector.
-fn unit_without_overflow(v: Vec3) -> Vec3 {
-    let unit = v.normalize_or_zero();
-    if unit != Vec3::ZERO || v == Vec3::ZERO {
-        return unit;
-    }
-    (v / v.abs().max_element()).normalize_or_zero()
 }
 
 /// The offset inside its pixel of sample `sample` of `samples_per_pixel` (§7):
@@ -387,12 +377,18 @@ mod tests {
         assert_eq!(zoom.eye, c + Vec3::new(0.0, 0.0, 0.35 * d));
         assert!("side".parse::<StandardView>().is_err());
         // Far-apart eye and target (their distance squared overflows f32) still
-        // make a camera; a box whose size overflows f32 has no standard view.
+        // make a camera, and a box 1e30 across has a standard view; one whose
+        // size overflows f32 has none.
         let far = Camera::new(Vec3::new(0.0, 0.0, 3e30), Vec3::ZERO, Vec3::Y, 45.0, 8, 8).unwrap();
         assert_eq!(far.direction(4, 4, 0.0, 0.0), Vec3::NEG_Z);
-        let huge = Bounds {
+        let large = Bounds {
             min: Vec3::ZERO,
-            max: Vec3::new(1e30, 1e30, 1e30),
+            max: Vec3::splat(1e30),
+        };
+        assert!(Camera::standard(StandardView::Front, &large, 8, 8).is_ok());
+        let huge = Bounds {
+            min: Vec3::splat(-3e38),
+            max: Vec3::splat(3e38),
         };
         assert!(matches!(
             Camera::standard(StandardView::Front, &huge, 8, 8),

@@ -13,6 +13,7 @@ pub mod scene;
 pub mod shading;
 #[cfg(test)]
 mod test_meshes;
+pub mod vector;
 pub mod volume;
 
 pub use camera::{Camera, CameraSetup, StandardView};

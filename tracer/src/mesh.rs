@@ -1,5 +1,6 @@
 //! Indexed triangle meshes as the tracer receives them from a file or a generator.
 
+use crate::vector::unit_or_zero;
 use glam::Vec3;
 use std::collections::HashMap;
 use thiserror::Error;
@@ -29,9 +30,16 @@ impl Bounds {
         (self.min + self.max) * 0.5
     }
 
-    /// Length of the box's diagonal.
+    /// Length of the box's diagonal (computed without squaring overflow for
+    /// boxes wider than about 1e19).
     pub fn diagonal(&self) -> f32 {
-        (self.max - self.min).length()
+        let extent = self.max - self.min;
+        let length = extent.length();
+        if length.is_finite() || !extent.is_finite() {
+            return length;
+        }
+        let largest = extent.abs().max_element();
+        largest * (extent / largest).length()
     }
 }
 
@@ -162,7 +170,7 @@ impl TriangleMesh {
         let faces: Vec<Vec3> = (0..self.triangles.len())
             .map(|t| self.face_normal(t))
             .collect();
-        let units: Vec<Vec3> = faces.iter().map(|n| n.normalize_or_zero()).collect();
+        let units: Vec<Vec3> = faces.iter().map(|&n| unit_or_zero(n)).collect();
         let cos_crease = crease.cos();
         // The corners around each vertex, as (triangle, corner) pairs in CSR form.
         let mut starts = vec![0usize; self.positions.len() + 1];
@@ -282,7 +290,7 @@ impl DirectionsAroundVertex {
             self.group_normal.push(if sum == Vec3::ZERO {
                 own
             } else {
-                sum.normalize_or_zero()
+                unit_or_zero(sum)
             });
         }
         // Groups with equal normals share one vertex.
@@ -366,6 +374,11 @@ mod tests {
         assert_eq!(bounds.max, Vec3::new(1.0, 1.0, 0.0));
         assert_eq!(bounds.center(), Vec3::new(0.5, 0.5, 0.0));
         assert!((bounds.diagonal() - 2f32.sqrt()).abs() < 1e-6);
+        let huge = Bounds {
+            min: Vec3::ZERO,
+            max: Vec3::new(3e30, 0.0, 4e30),
+        };
+        assert!((huge.diagonal() / 5e30 - 1.0).abs() < 1e-6);
         assert_eq!(mesh.face_normal(0), Vec3::Z);
     }
 

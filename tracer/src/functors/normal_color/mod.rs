@@ -7,6 +7,7 @@ use crate::functors::wgsl::{
 };
 use crate::functors::{HitColumns, RayColumns, MISS_PRIM};
 use crate::scene::TraceResources;
+use crate::vector::unit_or_zero;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
@@ -90,7 +91,7 @@ impl Functor for NormalColor {
                     mesh.triangles.len()
                 )));
             }
-            let normal = mesh.face_normal(prim as usize).normalize_or_zero();
+            let normal = unit_or_zero(mesh.face_normal(prim as usize));
             let facing = if normal.dot(direction) > 0.0 {
                 -normal
             } else {

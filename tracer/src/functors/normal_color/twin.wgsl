@@ -11,7 +11,7 @@ fn $FUNCTION(index: u32, ray: Ray, hit: Hit) -> vec3<f32> {
         $FUNCTION_fail(0u);
         return vec3<f32>(0.0);
     }
-    let normal = tracer_normalize_or_zero(tracer_mesh_face_normal(hit.prim));
+    let normal = tracer_unit_or_zero(tracer_mesh_face_normal(hit.prim));
     var facing = normal;
     if (tracer_dot(normal, ray.dir) > 0.0) {
         facing = -normal;

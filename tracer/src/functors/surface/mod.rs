@@ -25,6 +25,7 @@ use crate::functors::wgsl::{
 };
 use crate::functors::{HitColumns, RayColumns, SurfaceRecord, SurfaceWriter, MISS_PRIM};
 use crate::scene::TraceResources;
+use crate::vector::unit_or_zero;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
@@ -144,7 +145,7 @@ impl Functor for SurfaceFunctor {
             // The geometric normal on the ray's side (or the view vector for a
             // degenerate triangle, which a ray can hardly hit); as
             // `TriangleMesh::face_normal` computes it.
-            let face = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+            let face = unit_or_zero((p1 - p0).cross(p2 - p0));
             let facing = if face == Vec3::ZERO {
                 view
             } else if face.dot(dir) > 0.0 {

@@ -36,7 +36,7 @@ fn $FUNCTION(index: u32, ray: Ray, hit: Hit) -> Surface {
         + v * tracer_mesh_position(triangle.z);
     let view = -tracer_normalize_or_zero(ray.dir);
     // The geometric normal on the ray's side (the view vector for a degenerate triangle).
-    let face = tracer_normalize_or_zero(tracer_mesh_face_normal(hit.prim));
+    let face = tracer_unit_or_zero(tracer_mesh_face_normal(hit.prim));
     var facing = face;
     if (tracer_is_zero_vector(face)) {
         facing = view;

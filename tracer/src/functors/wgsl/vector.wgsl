@@ -52,6 +52,21 @@ fn tracer_normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(0.0);
 }
 
+// `crate::vector::unit_or_zero`: `tracer_normalize_or_zero`, except that a
+// nonzero finite vector whose squared length overflows or underflows is first
+// multiplied by the power of two that brings its largest component into 1 .. 2.
+fn tracer_unit_or_zero(v: vec3<f32>) -> vec3<f32> {
+    let unit = tracer_normalize_or_zero(v);
+    if (!tracer_is_zero_vector(unit) || tracer_is_zero_vector(v)
+        || !(tracer_is_finite(v.x) && tracer_is_finite(v.y) && tracer_is_finite(v.z))) {
+        return unit;
+    }
+    let largest = max(max(abs(v.x), abs(v.y)), abs(v.z));
+    let biased_exponent = i32((bitcast<u32>(largest) >> 23u) & 0xffu);
+    let scale = bitcast<f32>(u32(clamp(254 - biased_exponent, 1, 254)) << 23u);
+    return tracer_normalize_or_zero(v * scale);
+}
+
 fn tracer_is_zero_vector(v: vec3<f32>) -> bool {
     return v.x == 0.0 && v.y == 0.0 && v.z == 0.0;
 }
