@@ -170,6 +170,9 @@ SCENES = {
     "sphere-far": lambda: sphere(FAR, 1.0),
     "sphere-far-large": lambda: sphere(FAR, 100.0),
     "sphere-tiny": lambda: sphere((0.0, 0.0, 0.0), 1e-4),
+    # Beyond f32's comfortable range: cubes of coordinates overflow or underflow.
+    "sphere-1e15": lambda: sphere((0.0, 0.0, 0.0), 1e15),
+    "sphere-1e-14": lambda: sphere((0.0, 0.0, 0.0), 1e-14),
     "soup": soup,
     "one-triangle": one_triangle,
     "cube-every-face-twice": cube_every_face_twice,
