@@ -267,6 +267,16 @@ fn exit_statuses_and_messages() {
         2,
         &["nan.obj"],
     );
+    check(
+        &["run", &w1, "huge.obj"],
+        &[("huge.obj", "v 0 0 0\nv 1e30 0 0\nv 0 1e30 0\nf 1 2 3\n")],
+        2,
+        &[
+            "huge.obj",
+            "largest coordinate magnitude is 1e30",
+            "rescale the mesh",
+        ],
+    );
     check(&["run", &w1, "missing.obj"], &[], 2, &["missing.obj"]);
     check(
         &["run", &w1, "scene.ply"],

@@ -67,7 +67,20 @@ pub enum MeshError {
     },
     #[error("vertex normal {index} is not finite: {normal:?}")]
     NonFiniteNormal { index: usize, normal: Vec3 },
+    #[error(
+        "the mesh's largest coordinate magnitude is {largest:e}; dpp computes in f32 and \
+         supports meshes whose largest coordinate lies between {MIN_LARGEST_COORDINATE:e} and \
+         {MAX_COORDINATE:e} (squared distances must stay normal numbers): rescale the mesh"
+    )]
+    OutOfScale { largest: f32 },
 }
+
+/// The largest coordinate magnitude a mesh may have, and the least its
+/// largest may be (unless all are zero): between them the squares of
+/// world-space distances (lights, camera, bounds) stay normal f32 numbers.
+/// Tracing itself holds further (the BVH rescales by a power of two).
+pub const MAX_COORDINATE: f32 = 1e18;
+pub const MIN_LARGEST_COORDINATE: f32 = 1e-18;
 
 /// Triangle ids are `u32` and `u32::MAX` marks a miss, so the count must stay below it.
 pub const MAX_TRIANGLES: usize = u32::MAX as usize - 1;
@@ -101,6 +114,12 @@ impl TriangleMesh {
                     vertex,
                     vertex_count,
                 });
+            }
+        }
+        if let Some(bounds) = self.bounds() {
+            let largest = bounds.min.abs().max(bounds.max.abs()).max_element();
+            if largest > MAX_COORDINATE || (largest > 0.0 && largest < MIN_LARGEST_COORDINATE) {
+                return Err(MeshError::OutOfScale { largest });
             }
         }
         if let Some(normals) = &self.normals {
@@ -576,6 +595,21 @@ mod tests {
             mesh.validate(),
             Err(MeshError::NonFiniteVertex { index: 1, .. })
         ));
+    }
+
+    #[test]
+    fn meshes_too_large_or_too_small_for_f32_are_rejected() {
+        for (scale, accepted) in [(1e17, true), (1e19, false), (1e-17, true), (1e-19, false)] {
+            let mut mesh = one_triangle();
+            mesh.positions.truncate(3);
+            mesh.positions.iter_mut().for_each(|p| *p *= scale);
+            let result = mesh.validate();
+            assert_eq!(result.is_ok(), accepted, "{scale}: {result:?}");
+            if !accepted {
+                assert!(matches!(result, Err(MeshError::OutOfScale { .. })));
+                assert!(result.unwrap_err().to_string().contains("rescale the mesh"));
+            }
+        }
     }
 
     #[test]
