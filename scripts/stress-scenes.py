@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
 """Writes the scenes built to break a BVH traversal or a watertight triangle
-test, as OBJ files, into a folder (default: $DPP_SCENES/stress, else
-~/.cache/dpp-scenes/stress). docs/benchmarks.md measures dpp against Embree
-on them:
+test, as OBJ files (and a binary PLY of one too large for OBJ), into a folder
+(default: $DPP_SCENES/stress, else ~/.cache/dpp-scenes/stress).
+docs/benchmarks.md measures dpp against Embree on them:
 
     python3 scripts/stress-scenes.py
     T=~/.cache/dpp-scenes/stress
-    dpp bench $(ls $T/*.obj | grep -v slivers) --engine dpp,embree \\
+    dpp bench $(ls $T/*.obj $T/*.ply | grep -v slivers) --engine dpp,embree \\
         --workloads 1 --views front --threads 2 --rounds 2 --markdown stress.md
     # (exits with status 1: on sphere-1e15 Embree's own hits are off)
     # slivers: Embree takes minutes per 1080p frame there
@@ -14,8 +14,8 @@ on them:
         --size 480x270 --warmup 0 --rounds 1 --threads 2
 
 Plain Python 3, no packages; deterministic (fixed seeds), so every run writes
-the same files. Coordinates are written with 9 significant digits, which the
-loader rounds to f32.
+the same files. OBJ coordinates are written with 9 significant digits, which
+the loader rounds to f32; PLY ones as f32.
 """
 
 import math
@@ -56,6 +56,43 @@ def sphere(center, radius, segments=300):
         )
 
     return grid(segments, segments, point)
+
+
+def write_large_sphere_ply(path, segments):
+    """`sphere((0, 0, 0), 1, segments)` as a binary PLY, streamed row by row:
+    at millions of triangles, lists of tuples would take gigabytes."""
+    import struct
+
+    vertex, face = struct.Struct("<3f"), struct.Struct("<B3i")
+    with open(path, "wb") as out:
+        out.write(
+            (
+                "ply\nformat binary_little_endian 1.0\n"
+                "comment written by scripts/stress-scenes.py\n"
+                "element vertex %d\nproperty float x\nproperty float y\nproperty float z\n"
+                "element face %d\nproperty list uchar int vertex_indices\nend_header\n"
+                % ((segments + 1) ** 2, 2 * segments**2)
+            ).encode()
+        )
+        for j in range(segments + 1):
+            theta = math.pi * j / segments
+            row = bytearray()
+            for i in range(segments + 1):
+                phi = 2 * math.pi * i / segments
+                row += vertex.pack(
+                    math.sin(theta) * math.cos(phi),
+                    math.cos(theta),
+                    math.sin(theta) * math.sin(phi),
+                )
+            out.write(row)
+        for j in range(segments):
+            row = bytearray()
+            for i in range(segments):
+                a = j * (segments + 1) + i
+                b, c, d = a + 1, a + segments + 2, a + segments + 1
+                row += face.pack(3, a, b, c) + face.pack(3, a, c, d)
+            out.write(row)
+    return 2 * segments**2
 
 
 def merged(*meshes):
@@ -182,6 +219,13 @@ SCENES = {
     "slivers": slivers,
 }
 
+# Written as binary PLY: (name, segments).
+LARGE_SPHERES = [
+    # 10 million triangles; PLOC's tree of its pole fans is deeper than the
+    # traversal stacks allow, so that part is rebuilt by median split.
+    ("sphere-10m", 2236),
+]
+
 
 def main():
     default = os.path.join(
@@ -194,6 +238,10 @@ def main():
         path = os.path.join(folder, name + ".obj")
         write_obj(path, positions, triangles)
         print("%-24s %9d triangles  %s" % (name, len(triangles), path))
+    for name, segments in LARGE_SPHERES:
+        path = os.path.join(folder, name + ".ply")
+        count = write_large_sphere_ply(path, segments)
+        print("%-24s %9d triangles  %s" % (name, count, path))
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ use obvhs::bvh2::node::Bvh2Node;
 use obvhs::triangle::Triangle;
 use std::time::Duration;
 
+mod depth_limit;
 mod simd;
 mod wide;
 
@@ -32,9 +33,6 @@ pub use wide::Isa;
 /// Entries in a traversal stack: the deepest chain of inner nodes a BVH may have.
 /// The GPU shaders need a fixed bound too; [`Bvh::build`] guarantees it.
 pub const MAX_STACK_DEPTH: usize = 64;
-
-/// Triangles per leaf of the fallback median-split tree.
-const MEDIAN_SPLIT_LEAF_SIZE: usize = 4;
 
 /// One child of a [`BvhNode`]: its box and what it points to. 32 bytes, laid out
 /// like WGSL's `struct { min: vec3<f32>, index: u32, max: vec3<f32>, count: u32 }`.
@@ -131,8 +129,9 @@ fn bvh_space_scale(mesh: &TriangleMesh) -> f32 {
 
 impl Bvh {
     /// Builds the hierarchy for a mesh (validated first). Uses obvhs' PLOC builder
-    /// with its `medium` preset; in the unlikely case that its tree is deeper than
-    /// [`MAX_STACK_DEPTH`], falls back to a balanced median-split tree.
+    /// with its `medium` preset; where its tree is deeper than [`MAX_STACK_DEPTH`],
+    /// the subtrees that reach past it are rebuilt by median split
+    /// (`bvh/depth_limit.rs`), and should that still overrun, the whole tree is.
     pub fn build(mesh: &TriangleMesh) -> Result<Bvh, MeshError> {
         mesh.validate()?;
         let scale = bvh_space_scale(mesh);
@@ -152,19 +151,16 @@ impl Bvh {
 
     /// [`Bvh::build`] of a mesh whose coordinates need no scaling.
     fn build_unscaled(mesh: &TriangleMesh) -> Bvh {
-        let triangles: Vec<Triangle> = (0..mesh.triangles.len())
-            .map(|i| {
-                let [v0, v1, v2] = mesh.triangle_vertices(i).map(Vec3A::from);
-                Triangle { v0, v1, v2 }
-            })
-            .collect();
-        let mut build_time = Duration::ZERO;
-        let tree = obvhs::bvh2::builder::build_bvh2_from_tris(
-            &triangles,
-            obvhs::BvhBuildParams::medium_build(),
-            &mut build_time,
-        );
-        let bvh = flatten(&tree.nodes, &tree.primitive_indices, mesh);
+        let tree = ploc_tree(mesh);
+        let bvh = match depth_limit::limit_depth(
+            &tree.nodes,
+            &tree.primitive_indices,
+            mesh,
+            MAX_STACK_DEPTH,
+        ) {
+            None => flatten(&tree.nodes, &tree.primitive_indices, mesh),
+            Some((nodes, primitive_indices)) => flatten(&nodes, &primitive_indices, mesh),
+        };
         if bvh.stack_depth <= MAX_STACK_DEPTH {
             bvh
         } else {
@@ -174,38 +170,12 @@ impl Bvh {
 
     /// A balanced tree (depth about log2(n / 4)), for meshes that defeat PLOC.
     fn build_median_split(mesh: &TriangleMesh) -> Bvh {
-        let boxes: Vec<Aabb> = (0..mesh.triangles.len())
-            .map(|i| Aabb::from_points(&mesh.triangle_vertices(i).map(Vec3A::from)))
+        let boxes: Vec<Aabb> = (0..mesh.triangles.len() as u32)
+            .map(|id| depth_limit::triangle_box(mesh, id))
             .collect();
         let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
         let mut nodes = vec![Bvh2Node::default()];
-        let mut work = vec![(0usize, 0usize, boxes.len())];
-        while let Some((node, start, end)) = work.pop() {
-            let range = &mut order[start..end];
-            let bounds = range
-                .iter()
-                .fold(Aabb::INVALID, |b, &i| b.union(&boxes[i as usize]));
-            if range.len() <= MEDIAN_SPLIT_LEAF_SIZE {
-                nodes[node] = Bvh2Node::new(bounds, range.len() as u32, start as u32);
-                continue;
-            }
-            let centroids = range.iter().fold(Aabb::INVALID, |mut b, &i| {
-                b.extend(boxes[i as usize].center());
-                b
-            });
-            let axis = centroids.largest_axis();
-            let middle = range.len() / 2;
-            range.select_nth_unstable_by(middle, |&a, &b| {
-                let ca = boxes[a as usize].center_axis(axis);
-                let cb = boxes[b as usize].center_axis(axis);
-                ca.total_cmp(&cb)
-            });
-            let left = nodes.len();
-            nodes.extend([Bvh2Node::default(); 2]);
-            nodes[node] = Bvh2Node::new(bounds, 0, left as u32);
-            work.push((left, start, start + middle));
-            work.push((left + 1, start + middle, end));
-        }
+        depth_limit::median_split(&mut nodes, 0, &boxes, &mut order, 0);
         flatten(&nodes, &order, mesh)
     }
 
@@ -557,6 +527,22 @@ impl PreparedRay {
             None
         }
     }
+}
+
+/// obvhs' PLOC tree of a mesh (`medium` preset).
+fn ploc_tree(mesh: &TriangleMesh) -> obvhs::bvh2::Bvh2 {
+    let triangles: Vec<Triangle> = (0..mesh.triangles.len())
+        .map(|i| {
+            let [v0, v1, v2] = mesh.triangle_vertices(i).map(Vec3A::from);
+            Triangle { v0, v1, v2 }
+        })
+        .collect();
+    let mut build_time = Duration::ZERO;
+    obvhs::bvh2::builder::build_bvh2_from_tris(
+        &triangles,
+        obvhs::BvhBuildParams::medium_build(),
+        &mut build_time,
+    )
 }
 
 /// Converts an obvhs-style binary tree (root at 0, siblings at `first_index` and

@@ -764,7 +764,7 @@ fn check_batch_against_binary(bvh: &Bvh, rays: &[Ray]) {
 #[test]
 fn packets_of_camera_rays_match_binary() {
     use crate::camera::StandardView;
-    let mesh = builtin_scene(48).unwrap();
+    let mesh = builtin_scene(200).unwrap();
     let bvh = Bvh::build(&mesh).unwrap();
     for view in [StandardView::Front, StandardView::Back] {
         let rays = camera_rays(&mesh, view, (160, 120));
@@ -1002,5 +1002,90 @@ fn very_large_and_very_small_scenes_trace_like_a_unit_scene() {
             assert_eq!(bvh.intersect_closest_binary(&ray), expected);
             assert_eq!(bvh.occluded(&ray, ray.tmax), expected.is_some());
         }
+    }
+}
+
+#[test]
+fn the_tree_does_not_depend_on_the_thread_count() {
+    // obvhs builds in parallel (its radix sorts and reinsertion on rayon);
+    // exact ties go to the lowest leaf-order triangle, so a tree that changed
+    // with the core count would change images.
+    let mesh = builtin_scene(200).unwrap();
+    let build_with = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| Bvh::build(&mesh).unwrap())
+    };
+    let one = build_with(1);
+    for threads in [2, 3, 8] {
+        let other = build_with(threads);
+        assert_eq!(
+            other.triangle_ids(),
+            one.triangle_ids(),
+            "{threads} threads"
+        );
+        assert_eq!(other.nodes(), one.nodes(), "{threads} threads");
+    }
+}
+
+#[test]
+fn a_tree_plocs_too_deep_keeps_what_fits_and_still_matches_brute_force() {
+    // Triangles halving in size and distance towards the origin: PLOC merges
+    // the two nearest clusters, the smallest ones, so it grows one long chain.
+    let mut positions = Vec::new();
+    let mut triangles = Vec::new();
+    for i in 0..120 {
+        let size = 0.5f32.powi(i);
+        let base = positions.len() as u32;
+        positions.extend([
+            Vec3::new(size, 0.0, 0.0),
+            Vec3::new(1.5 * size, 0.0, 0.0),
+            Vec3::new(size, 0.5 * size, 0.0),
+        ]);
+        triangles.push([base, base + 1, base + 2]);
+    }
+    // And an ordinary part that PLOC builds well.
+    let soup = random_soup(&mut SplitMix64::new(5), 2000);
+    let offset = positions.len() as u32;
+    positions.extend(
+        soup.positions
+            .iter()
+            .map(|&p| p + Vec3::new(10.0, 0.0, 0.0)),
+    );
+    triangles.extend(soup.triangles.iter().map(|t| t.map(|v| v + offset)));
+    let mesh = TriangleMesh {
+        positions,
+        triangles,
+        normals: None,
+        scalars: None,
+    };
+    let ploc = ploc_tree(&mesh);
+    let limited =
+        depth_limit::limit_depth(&ploc.nodes, &ploc.primitive_indices, &mesh, MAX_STACK_DEPTH);
+    assert!(limited.is_some(), "PLOC's own tree is too deep");
+    let bvh = Bvh::build(&mesh).unwrap();
+    check_structure(&bvh, &mesh);
+    assert!(bvh.stack_depth() <= MAX_STACK_DEPTH);
+    let balanced = Bvh::build_median_split(&mesh);
+    assert_ne!(
+        bvh.triangle_ids(),
+        balanced.triangle_ids(),
+        "PLOC's tree was kept in part"
+    );
+    let mut random = SplitMix64::new(6);
+    for ray in random_rays(&mut random, 2000, &mesh) {
+        check_against_brute_force(&bvh, &mesh, &ray);
+    }
+    // Rays at the chain's tiniest triangles.
+    for i in [40, 80, 119] {
+        let size = 0.5f32.powi(i);
+        let ray = Ray {
+            origin: Vec3::new(1.1 * size, 0.1 * size, 1.0),
+            direction: -Vec3::Z,
+            tmax: f32::INFINITY,
+        };
+        check_against_brute_force(&bvh, &mesh, &ray);
     }
 }
