@@ -19,7 +19,6 @@
 use crate::mesh::{MeshError, TriangleMesh};
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec3, Vec3A};
-use obvhs::aabb::Aabb;
 use obvhs::bvh2::node::Bvh2Node;
 use obvhs::triangle::Triangle;
 use std::time::Duration;
@@ -131,7 +130,7 @@ impl Bvh {
     /// Builds the hierarchy for a mesh (validated first). Uses obvhs' PLOC builder
     /// with its `medium` preset; where its tree is deeper than [`MAX_STACK_DEPTH`],
     /// the subtrees that reach past it are rebuilt by median split
-    /// (`bvh/depth_limit.rs`), and should that still overrun, the whole tree is.
+    /// (`bvh/depth_limit.rs`).
     pub fn build(mesh: &TriangleMesh) -> Result<Bvh, MeshError> {
         mesh.validate()?;
         let scale = bvh_space_scale(mesh);
@@ -152,31 +151,11 @@ impl Bvh {
     /// [`Bvh::build`] of a mesh whose coordinates need no scaling.
     fn build_unscaled(mesh: &TriangleMesh) -> Bvh {
         let tree = ploc_tree(mesh);
-        let bvh = match depth_limit::limit_depth(
-            &tree.nodes,
-            &tree.primitive_indices,
-            mesh,
-            MAX_STACK_DEPTH,
-        ) {
+        match depth_limit::limit_depth(&tree.nodes, &tree.primitive_indices, mesh, MAX_STACK_DEPTH)
+        {
             None => flatten(&tree.nodes, &tree.primitive_indices, mesh),
             Some((nodes, primitive_indices)) => flatten(&nodes, &primitive_indices, mesh),
-        };
-        if bvh.stack_depth <= MAX_STACK_DEPTH {
-            bvh
-        } else {
-            Bvh::build_median_split(mesh)
         }
-    }
-
-    /// A balanced tree (depth about log2(n / 4)), for meshes that defeat PLOC.
-    fn build_median_split(mesh: &TriangleMesh) -> Bvh {
-        let boxes: Vec<Aabb> = (0..mesh.triangles.len() as u32)
-            .map(|id| depth_limit::triangle_box(mesh, id))
-            .collect();
-        let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
-        let mut nodes = vec![Bvh2Node::default()];
-        depth_limit::median_split(&mut nodes, 0, &boxes, &mut order, 0);
-        flatten(&nodes, &order, mesh)
     }
 
     pub fn nodes(&self) -> &[BvhNode] {
@@ -629,10 +608,9 @@ fn flatten(source: &[Bvh2Node], primitive_indices: &[u32], mesh: &TriangleMesh) 
         bvh.nodes[our_index] = BvhNode { children };
         work.extend(inner_children.into_iter().rev().flatten());
     }
-    // A deeper tree is discarded by `Bvh::build` (and could overflow the stacks).
-    if bvh.stack_depth <= MAX_STACK_DEPTH {
-        bvh.wide = wide::WideBvh::build(&bvh.nodes, &bvh.triangles);
-    }
+    // `depth_limit::limit_depth` keeps every tree within the stacks.
+    debug_assert!(bvh.stack_depth <= MAX_STACK_DEPTH, "{}", bvh.stack_depth);
+    bvh.wide = wide::WideBvh::build(&bvh.nodes, &bvh.triangles);
     bvh
 }
 

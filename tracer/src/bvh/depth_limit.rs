@@ -8,13 +8,18 @@
 //! would reach past it, each by a [`median_split`] of its own triangles, and
 //! keeps PLOC's tree everywhere else.
 
-use crate::mesh::TriangleMesh;
+use super::MAX_STACK_DEPTH;
+use crate::mesh::{TriangleMesh, MAX_TRIANGLES};
 use glam::Vec3A;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::node::Bvh2Node;
 
 /// Triangles per leaf of a median-split tree.
 const MEDIAN_SPLIT_LEAF_SIZE: usize = 4;
+
+// A median split of the largest mesh fits the stacks, so [`limit_depth`] can
+// always fall back to one from the root (checked at compile time).
+const _: () = assert!(median_split_levels(MAX_TRIANGLES) <= MAX_STACK_DEPTH);
 
 /// The box of triangle `id`.
 pub(super) fn triangle_box(mesh: &TriangleMesh, id: u32) -> Aabb {
@@ -26,9 +31,8 @@ pub(super) fn triangle_box(mesh: &TriangleMesh, id: u32) -> Aabb {
 /// `max_depth` (the root's depth is 1), or `None` when it has none already.
 /// PLOC's nodes are kept down to where a subtree would reach past the limit and
 /// a child of it could not be rebuilt within it anymore; that subtree is
-/// rebuilt by a median split of its triangles. A tree too large for even one
-/// median split from the root keeps reaching past the limit, so callers check
-/// the result's depth.
+/// rebuilt by a median split of its triangles. At worst that is the root, and
+/// a median split of any mesh fits (a compile-time assertion below).
 pub(super) fn limit_depth(
     nodes: &[Bvh2Node],
     primitive_indices: &[u32],
@@ -115,7 +119,7 @@ impl SubtreeSizes {
 }
 
 /// The levels of inner nodes of a [`median_split`] of `triangles`.
-fn median_split_levels(triangles: usize) -> usize {
+const fn median_split_levels(triangles: usize) -> usize {
     if triangles <= MEDIAN_SPLIT_LEAF_SIZE {
         0
     } else {
