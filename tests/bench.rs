@@ -92,6 +92,12 @@ fn a_tiny_bench_writes_tables_json_and_a_chart() {
     }
     // The unfused WORKLOAD1 plan has `map<intersect>` as a stage of its own.
     assert!(markdown.contains("| 3 | `map<intersect>` |"), "{markdown}");
+    // Fused stages are split op by op: WORKLOAD2's one tracing stage shows
+    // what its intersection and its shading each cost.
+    assert!(markdown.contains("Inside stage 1: "), "{markdown}");
+    for op in ["| `hits = map<intersect>` |", "| `rgb = map<shader>` |"] {
+        assert!(markdown.contains(op), "{op} missing:\n{markdown}");
+    }
 
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
@@ -132,6 +138,19 @@ fn a_tiny_bench_writes_tables_json_and_a_chart() {
     assert!(w1["fused"]["frame_mrays_per_s"].as_f64().unwrap() > 0.0);
     assert_eq!(w1["fused"]["frames_ms"].as_array().unwrap().len(), 1);
     assert!(w1["unfused"]["stages"].as_array().unwrap().len() > 3);
+    // The JSON has the same op split: one entry per op of the stage.
+    let w2_stage = &workloads[1]["fused"]["stages"][0];
+    let ops = w2_stage["op_thread_ms"].as_array().unwrap();
+    assert_eq!(
+        ops.len(),
+        w2_stage["ops"].as_str().unwrap().split(" → ").count(),
+        "{w2_stage}"
+    );
+    let intersect = ops
+        .iter()
+        .find(|op| op["op"] == "hits = map<intersect>")
+        .unwrap();
+    assert!(intersect["thread_ms"].as_f64().unwrap() > 0.0, "{w2_stage}");
     let mut all = Vec::new();
     numbers(&json, "", &mut all);
     assert!(all.len() > 50);
@@ -139,7 +158,8 @@ fn a_tiny_bench_writes_tables_json_and_a_chart() {
         // Counts of rounds, and the time of an empty step, may be zero.
         let may_be_zero = path.ends_with("warmup_rounds")
             || path.ends_with("normals_ms")
-            || path.ends_with("].ms");
+            || path.ends_with("].ms")
+            || path.ends_with("].thread_ms");
         assert!(value.is_finite() && *value >= 0.0, "{path} = {value}");
         assert!(
             may_be_zero || *value > 0.0,
@@ -371,6 +391,10 @@ fn a_tiny_gpu_bench_names_the_adapter_and_times_stages() {
             assert!(!stages.is_empty(), "{m}");
             let total: f64 = stages.iter().map(|s| s["ms"].as_f64().unwrap()).sum();
             assert!(total > 0.0, "stage times: {m}");
+            // A GPU stage is one kernel: not split by op.
+            for stage in stages {
+                assert_eq!(stage["op_thread_ms"], serde_json::json!([]), "{stage}");
+            }
         }
     }
     // WORKLOAD1's `map<intersect>` rate comes from the unfused plan's stage.

@@ -192,6 +192,54 @@ fn outputs_do_not_depend_on_threads_or_fusion() {
     }
 }
 
+/// `--profile` splits a fused stage op by op: WORKLOAD2 is one stage, and its
+/// profile lists the ops that trace and shade, named after their variables,
+/// with their times and shares (views of record fields are left out).
+#[test]
+fn the_profile_splits_a_fused_stage_by_op() {
+    let dir = tempfile::tempdir().unwrap();
+    let w2 = pipeline("workload2.dpp");
+    let output = dpp(
+        &["run", &w2, "--size", "40x30", "--threads", "2", "--profile"],
+        dir.path(),
+    );
+    let stderr = text(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    let header = stderr
+        .lines()
+        .position(|l| l.trim_start().starts_with("op ") && l.contains("thread ms"))
+        .unwrap_or_else(|| panic!("no op split in:\n{stderr}"));
+    let ops: Vec<&str> = stderr
+        .lines()
+        .skip(header + 1)
+        .take_while(|l| !l.starts_with("whole run"))
+        .collect();
+    // `name  thread-ms  share%`: the name may have spaces (`rays = map<cameraRay>`).
+    let rows: Vec<(String, f64)> = ops
+        .iter()
+        .map(|line| {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            let (name, numbers) = words.split_at(words.len() - 2);
+            let share = numbers[1].trim_end_matches('%').parse::<f64>().unwrap();
+            (name.join(" "), share)
+        })
+        .collect();
+    let names: Vec<&str> = rows.iter().map(|(name, _)| name.as_str()).collect();
+    for name in [
+        "rays = map<cameraRay>",
+        "hits = map<intersect>",
+        "surf = map<surface>",
+        "rgb = map<shader>",
+        "image = scatter",
+    ] {
+        assert!(names.contains(&name), "{name} not in {names:?}:\n{stderr}");
+    }
+    assert!(!names.iter().any(|n| n.starts_with('.')), "{names:?}");
+    let shares: f64 = rows.iter().map(|(_, share)| share).sum();
+    // The listed shares are of the stage's op time, field views (about nothing) left out.
+    assert!((shares - 100.0).abs() < 1.0, "{shares}:\n{stderr}");
+}
+
 /// `(arguments, expected exit status, text the output must contain)`.
 fn check(args: &[&str], files: &[(&str, &str)], status: i32, expected: &[&str]) {
     let dir = tempfile::tempdir().unwrap();

@@ -34,6 +34,42 @@ pub struct StageTiming {
     /// Wall time on the host (the CPU backend), or device time where the GPU
     /// backend measured it with timestamp queries.
     pub time: Duration,
+    /// Where the stage's time went, op by op, where the backend can split it
+    /// (the CPU backend: one entry per op of the stage, in stage order);
+    /// empty where it cannot (a GPU stage is one kernel).
+    pub ops: Vec<OpTiming>,
+}
+
+/// Time the chunks of a stage spent in one of its ops, summed over the threads
+/// that ran them (so the ops of a stage on 2 threads add up to about twice its
+/// wall time, less what the stage does outside its chunks: joining
+/// materialised values, finishing sinks).
+#[derive(Clone, Debug)]
+pub struct OpTiming {
+    pub label: String,
+    pub thread_time: Duration,
+}
+
+/// An op as a stage's profile names it: `name = map<f>` where its one output
+/// has a name in the pipeline, else the op alone (`map<f>`, `.field`).
+fn op_label(plan: &Plan, op: &Op) -> String {
+    match op.outputs.as_slice() {
+        [output] if !plan.var(*output).name.starts_with('%') && !op.label().starts_with('.') => {
+            format!("{} = {}", plan.var(*output).name, op.label())
+        }
+        _ => op.label(),
+    }
+}
+
+/// What a backend measured of one run of a stage.
+#[derive(Clone, Debug, Default)]
+pub struct StageMeasurement {
+    /// Device time, when the backend measured one itself (GPU timestamps);
+    /// otherwise the interpreter takes the host's wall time.
+    pub device_time: Option<Duration>,
+    /// Per op of the stage, in stage order, summed over threads; empty where
+    /// the backend cannot split a stage.
+    pub op_thread_times: Vec<Duration>,
 }
 
 #[derive(Clone, Debug)]
@@ -128,12 +164,12 @@ pub trait Backend {
     fn field(&self, array: &Self::Array, index: usize) -> Option<Self::Array>;
 
     /// Runs the stage, writing what it materialises (and a sink's result) into
-    /// `slots`. Returns the device time when the backend measured one itself.
+    /// `slots`, and says what it measured of it.
     fn run_stage(
         &mut self,
         call: &StageCall<'_>,
         slots: &mut Slots<Self::Array>,
-    ) -> Result<Option<Duration>, RunError>;
+    ) -> Result<StageMeasurement, RunError>;
 
     /// The array as a host column, for the run's outputs.
     fn to_column(&mut self, array: &Self::Array) -> Result<Arc<Column>, RunError>;
@@ -178,6 +214,7 @@ pub fn interpret_with_inputs<B: Backend>(
                 runs: 0,
                 elements: 0,
                 time: Duration::ZERO,
+                ops: Vec::new(),
             })
             .collect(),
         stages,
@@ -273,7 +310,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                         .position(|s| std::ptr::eq(*s, stage))
                         .expect("every stage is in the plan");
                     let start = Instant::now();
-                    let (elements, device_time) = self.stage(stage).map_err(|e| {
+                    let (elements, measured) = self.stage(stage).map_err(|e| {
                         error(format!(
                             "stage {} [{}]: {}",
                             number + 1,
@@ -284,7 +321,20 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                     let timing = &mut self.profile[number];
                     timing.runs += 1;
                     timing.elements += elements as u64;
-                    timing.time += device_time.unwrap_or_else(|| start.elapsed());
+                    timing.time += measured.device_time.unwrap_or_else(|| start.elapsed());
+                    if timing.ops.is_empty() && !measured.op_thread_times.is_empty() {
+                        timing.ops = stage
+                            .ops
+                            .iter()
+                            .map(|op| OpTiming {
+                                label: op_label(self.plan, op),
+                                thread_time: Duration::ZERO,
+                            })
+                            .collect();
+                    }
+                    for (op, time) in timing.ops.iter_mut().zip(&measured.op_thread_times) {
+                        op.thread_time += *time;
+                    }
                 }
                 Node::Op(_) => unreachable!("plans hand backends stages, never bare ops"),
                 Node::Host { dst, expr, .. } => {
@@ -381,7 +431,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
 
     /// Runs one stage; returns the number of elements it ran over and the
     /// backend's own measure of its time, if any.
-    fn stage(&mut self, stage: &'a Stage) -> Result<(usize, Option<Duration>), RunError> {
+    fn stage(&mut self, stage: &'a Stage) -> Result<(usize, StageMeasurement), RunError> {
         let head = &stage.ops[0];
         let mut host_values = Vec::with_capacity(stage.ops.len());
         for op in &stage.ops {
@@ -462,8 +512,8 @@ impl<'a, B: Backend> Interpreter<'a, B> {
             uniforms: self.uniforms,
             records: self.records,
         };
-        let device_time = self.backend.run_stage(&call, &mut self.slots)?;
-        Ok((len, device_time))
+        let measured = self.backend.run_stage(&call, &mut self.slots)?;
+        Ok((len, measured))
     }
 }
 

@@ -4,7 +4,7 @@
 
 mod common;
 
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
+use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext, RunResult};
 use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuLimits, GpuRunContext};
 use dpp_runtime::*;
 use proptest::prelude::*;
@@ -153,6 +153,13 @@ fn data_of(case: &Case) -> common::Data {
 }
 
 fn run(case: &Case, fuse: bool, threads: usize, chunk: usize) -> HashMap<String, OutputValue> {
+    run_result(case, fuse, threads, chunk)
+        .outputs
+        .into_iter()
+        .collect()
+}
+
+fn run_result(case: &Case, fuse: bool, threads: usize, chunk: usize) -> RunResult {
     let library = library();
     let plan = compile_case(case, &library, fuse);
     let data = data_of(case);
@@ -167,11 +174,17 @@ fn run(case: &Case, fuse: bool, threads: usize, chunk: usize) -> HashMap<String,
         .num_threads(threads)
         .build()
         .unwrap();
-    let result = pool.install(|| run_plan(&plan, &context)).unwrap();
-    result.outputs.into_iter().collect()
+    pool.install(|| run_plan(&plan, &context)).unwrap()
 }
 
 fn run_gpu(case: &Case, fuse: bool, gpu: &GpuContext) -> HashMap<String, OutputValue> {
+    run_gpu_result(case, fuse, gpu)
+        .outputs
+        .into_iter()
+        .collect()
+}
+
+fn run_gpu_result(case: &Case, fuse: bool, gpu: &GpuContext) -> RunResult {
     let library = library();
     let plan = compile_case(case, &library, fuse);
     let data = data_of(case);
@@ -183,8 +196,7 @@ fn run_gpu(case: &Case, fuse: bool, gpu: &GpuContext) -> HashMap<String, OutputV
         resources: &data,
         profile: false,
     };
-    let result = run_plan_gpu(&plan, &context).unwrap_or_else(|e| panic!("{e}"));
-    result.outputs.into_iter().collect()
+    run_plan_gpu(&plan, &context).unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn u32s(outputs: &HashMap<String, OutputValue>, name: &str) -> Vec<u32> {
@@ -358,6 +370,66 @@ fn default_chunk_size_agrees_with_small_chunks() {
         "segmentedExclusive",
     ] {
         assert_eq!(u32s(&small, name), u32s(&default, name), "{name}");
+    }
+}
+
+/// The CPU backend says where each stage's time went, op by op, so a fused
+/// stage's profile is not one opaque number: an entry per op in stage order,
+/// named after the pipeline's variable where the op makes one, timed inside
+/// the stage (on 2 threads the ops cannot add up to more than twice its wall
+/// time). A GPU stage is one kernel: no split.
+#[test]
+fn fused_stages_are_timed_op_by_op_on_the_cpu() {
+    let mut runner = proptest::test_runner::TestRunner::deterministic();
+    let case = case_of_size(Just(20_000))
+        .new_tree(&mut runner)
+        .unwrap()
+        .current();
+    let library = library();
+    let plan = compile_case(&case, &library, true);
+    let result = run_result(&case, true, 2, dpp_runtime::cpu::kernels::DEFAULT_CHUNK);
+    let stages = plan.stages();
+    assert_eq!(result.profile.len(), stages.len());
+    let mut labels = Vec::new();
+    for (timing, stage) in result.profile.iter().zip(&stages) {
+        assert_eq!(timing.ops.len(), stage.ops.len(), "{}", timing.label);
+        let op_time: std::time::Duration = timing.ops.iter().map(|op| op.thread_time).sum();
+        assert!(
+            op_time <= 2 * timing.time,
+            "{}: {op_time:?} in {:?}",
+            timing.label,
+            timing.time
+        );
+        labels.extend(timing.ops.iter().map(|op| op.label.clone()));
+    }
+    for expected in [
+        "added = map<add>",
+        "permuted = scatter",
+        "reduce<add>",
+        "iota",
+    ] {
+        assert!(
+            labels.iter().any(|l| l == expected),
+            "{expected} not in {labels:?}"
+        );
+    }
+    // The stage that adds `a` and `b` has its ops timed, not left at zero.
+    let adding = result
+        .profile
+        .iter()
+        .find(|t| t.ops.iter().any(|op| op.label == "added = map<add>"))
+        .unwrap();
+    assert!(
+        adding.ops.iter().any(|op| !op.thread_time.is_zero()),
+        "{adding:?}"
+    );
+    if let Some(gpu) = common::gpu() {
+        let result = run_gpu_result(&case, true, gpu);
+        assert!(
+            result.profile.iter().all(|t| t.ops.is_empty()),
+            "{:?}",
+            result.profile
+        );
     }
 }
 

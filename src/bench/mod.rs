@@ -314,6 +314,36 @@ pub struct StageTime {
     pub label: String,
     /// Mean over the measured rounds.
     pub ms: f64,
+    /// Where a CPU stage's time went, op by op (`StageTiming::ops`); empty on the GPU.
+    pub ops: Vec<OpTime>,
+}
+
+/// The time a stage's chunks spent in one op, summed over threads; mean over
+/// the measured rounds.
+#[derive(Clone, Debug)]
+pub struct OpTime {
+    pub label: String,
+    pub thread_ms: f64,
+}
+
+impl StageTime {
+    /// The ops worth listing apart, with their shares of the stage's op time:
+    /// none for a stage of one op, and no field views (they copy nothing).
+    pub fn op_shares(&self) -> Vec<(&OpTime, f64)> {
+        let total: f64 = self.ops.iter().map(|op| op.thread_ms).sum();
+        let listed: Vec<&OpTime> = self
+            .ops
+            .iter()
+            .filter(|op| !op.label.starts_with('.'))
+            .collect();
+        if listed.len() < 2 || total <= 0.0 {
+            return Vec::new();
+        }
+        listed
+            .into_iter()
+            .map(|op| (op, op.thread_ms / total))
+            .collect()
+    }
 }
 
 impl Measurement {
@@ -871,11 +901,22 @@ fn add_stages(stages: &mut Vec<StageTime>, profile: &[StageTiming], rounds: u32)
                 stage: t.stage,
                 label: t.label.clone(),
                 ms: 0.0,
+                ops: t
+                    .ops
+                    .iter()
+                    .map(|op| OpTime {
+                        label: op.label.clone(),
+                        thread_ms: 0.0,
+                    })
+                    .collect(),
             })
             .collect();
     }
     for (stage, timing) in stages.iter_mut().zip(profile) {
         stage.ms += ms(timing.time) / f64::from(rounds);
+        for (op, measured) in stage.ops.iter_mut().zip(&timing.ops) {
+            op.thread_ms += ms(measured.thread_time) / f64::from(rounds);
+        }
     }
 }
 

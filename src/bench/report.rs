@@ -354,6 +354,9 @@ impl Report {
                         );
                     }
                     md.push('\n');
+                    if fused {
+                        write_op_split(&mut md, &measurements, views);
+                    }
                 }
             }
         }
@@ -373,6 +376,10 @@ impl Report {
                     "stage": s.stage,
                     "ops": s.label,
                     "ms": s.ms,
+                    "op_thread_ms": s.ops.iter().map(|op| json!({
+                        "op": op.label,
+                        "thread_ms": op.thread_ms,
+                    })).collect::<Vec<_>>(),
                 })).collect::<Vec<_>>(),
             });
             if self.gpu.is_some() {
@@ -471,5 +478,51 @@ impl Report {
             report["stage_timing"] = json!(gpu.stage_timing());
         }
         report
+    }
+}
+
+/// The op split of each fused stage of more than one op (CPU backend): the
+/// time its chunks spent in each op, summed over threads, as a mean over the
+/// views; the op's share of the stage's op time; and that share of the stage's
+/// wall time, which is what the op costs the frame.
+fn write_op_split(md: &mut String, measurements: &[&Measurement], views: f64) {
+    let Some(first) = measurements.first() else {
+        return;
+    };
+    for (index, stage) in first.stages.iter().enumerate() {
+        let stages: Vec<_> = measurements
+            .iter()
+            .filter_map(|m| m.stages.get(index))
+            .collect();
+        let mean_of = |value: &dyn Fn(&super::StageTime) -> f64| {
+            stages.iter().map(|s| value(s)).sum::<f64>() / views
+        };
+        let stage_ms = mean_of(&|s| s.ms);
+        let mut mean_stage = stage.clone();
+        for (position, op) in mean_stage.ops.iter_mut().enumerate() {
+            op.thread_ms = mean_of(&|s| s.ops.get(position).map_or(0.0, |o| o.thread_ms));
+        }
+        let shares = mean_stage.op_shares();
+        if shares.is_empty() {
+            continue;
+        }
+        let _ = writeln!(
+            md,
+            "Inside stage {}: each op's time summed over the threads, its share of the stage's op time, and that share of the stage's {stage_ms:.1} ms:\n",
+            stage.stage
+        );
+        let _ = writeln!(md, "| op | thread ms | share | ms of the stage |");
+        let _ = writeln!(md, "| --- | ---: | ---: | ---: |");
+        for (op, share) in shares {
+            let _ = writeln!(
+                md,
+                "| `{}` | {:.2} | {:.1}% | {:.1} |",
+                op.label,
+                op.thread_ms,
+                100.0 * share,
+                share * stage_ms
+            );
+        }
+        md.push('\n');
     }
 }

@@ -1,7 +1,8 @@
 //! The CPU backend: runs a plan's stages with rayon over fixed-size chunks
 //! (fixed, not per thread, so results do not depend on the thread count).
 //! Inside a stage each chunk runs the ops in plan order; values that the stage
-//! does not materialise live only as chunk-sized columns.
+//! does not materialise live only as chunk-sized columns. Each chunk times
+//! its ops, so a fused stage's profile still says where its time went.
 
 use super::kernels::{self, Element, ScanTotal};
 use super::shared_scatter::{Claimed, Owners, ScatterClaims, SharedTarget};
@@ -11,12 +12,13 @@ use crate::functor::{CallContext, FunctorLibrary};
 use crate::host::Uniforms;
 use crate::interpret::{
     elementwise_materialised, error, interpret, is_sink, Backend, OpHostValues, Slots, StageCall,
+    StageMeasurement,
 };
 use crate::types::ElemType;
 use std::any::Any;
 use std::ops::Range;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 pub struct RunContext<'a> {
     pub library: &'a FunctorLibrary,
@@ -28,7 +30,7 @@ pub struct RunContext<'a> {
 }
 
 pub use crate::interpret::{
-    OutputValue, RunError, RunResult, StageTiming, MAX_ELEMENTS, MAX_WHILE_ITERATIONS,
+    OpTiming, OutputValue, RunError, RunResult, StageTiming, MAX_ELEMENTS, MAX_WHILE_ITERATIONS,
 };
 
 /// Runs `plan` on the CPU.
@@ -61,14 +63,17 @@ impl Backend for CpuBackend<'_> {
         &mut self,
         call: &StageCall<'_>,
         slots: &mut Slots<Arc<Column>>,
-    ) -> Result<Option<Duration>, RunError> {
-        StageRun {
+    ) -> Result<StageMeasurement, RunError> {
+        let op_thread_times = StageRun {
             call,
             context: self.context,
             slots,
         }
         .run()?;
-        Ok(None)
+        Ok(StageMeasurement {
+            device_time: None,
+            op_thread_times,
+        })
     }
 
     fn to_column(&mut self, array: &Arc<Column>) -> Result<Arc<Column>, RunError> {
@@ -102,6 +107,8 @@ struct ChunkResult {
     sinks: Vec<SinkPart>,
     /// The chunk's claims, by claims group of [`DirectScatters`].
     claims: Vec<Option<Claimed>>,
+    /// The time the chunk spent in each op of the stage.
+    op_times: Vec<Duration>,
 }
 
 enum SinkPart {
@@ -147,7 +154,9 @@ impl StageRun<'_, '_> {
         self.call.elem_type(var)
     }
 
-    fn run(&mut self) -> Result<(), RunError> {
+    /// Runs the stage; returns the time its chunks spent in each op, summed
+    /// over the threads.
+    fn run(&mut self) -> Result<Vec<Duration>, RunError> {
         let stage = self.call.stage;
         let head = &stage.ops[0];
         let host_values = &self.call.host_values;
@@ -166,6 +175,12 @@ impl StageRun<'_, '_> {
         })
         .into_iter()
         .collect::<Result<Vec<_>, RunError>>()?;
+        let mut op_times = vec![Duration::ZERO; stage.ops.len()];
+        for result in &results {
+            for (total, time) in op_times.iter_mut().zip(&result.op_times) {
+                *total += *time;
+            }
+        }
 
         // Materialised values: the chunks joined in order, variables in parallel.
         let call = self.call;
@@ -201,7 +216,7 @@ impl StageRun<'_, '_> {
                 None => self.finish_sink(op, sink_values, &results, number)?,
             }
         }
-        Ok(())
+        Ok(op_times)
     }
 
     /// The targets of the stage's plain scatters, made before its chunks run.
@@ -421,7 +436,16 @@ impl StageRun<'_, '_> {
         let mut sinks = Vec::new();
         // By claims group: this chunk's claims, made by the group's first scatter.
         let mut claims: Vec<Option<Claimed>> = direct.groups.iter().map(|_| None).collect();
-        for (op, values) in stage.ops.iter().zip(host_values) {
+        // One clock reading per op: op `i`'s time runs from its start to the
+        // start of op `i + 1` (or the end of the loop), whichever way it ends.
+        let mut op_times = vec![Duration::ZERO; stage.ops.len()];
+        let mut op_start = Instant::now();
+        for (number, (op, values)) in stage.ops.iter().zip(host_values).enumerate() {
+            if number > 0 {
+                let now = Instant::now();
+                op_times[number - 1] = now - op_start;
+                op_start = now;
+            }
             let functor_context = |first_index: usize| CallContext {
                 named: &values.named,
                 uniforms: self.context.uniforms,
@@ -585,6 +609,9 @@ impl StageRun<'_, '_> {
                 locals.push((*output, ChunkValue::Chunk(Arc::new(column))));
             }
         }
+        if let Some(last) = op_times.last_mut() {
+            *last = op_start.elapsed();
+        }
         let mut materialised = Vec::new();
         for var in elementwise_materialised(stage) {
             let value = lookup(&locals, var)?;
@@ -598,6 +625,7 @@ impl StageRun<'_, '_> {
             materialised,
             sinks,
             claims,
+            op_times,
         })
     }
 

@@ -13,7 +13,7 @@ use crate::column::Column;
 use crate::functor::{FunctorLibrary, MonoidOp};
 use crate::host::{HostValue, Uniforms};
 use crate::interpret::{
-    error, interpret_with_inputs, Backend, RunError, RunResult, Slots, StageCall,
+    error, interpret_with_inputs, Backend, RunError, RunResult, Slots, StageCall, StageMeasurement,
 };
 use crate::types::ElemType;
 use crate::wgsl::{host_type_wgsl, record_structs, GpuBuffer};
@@ -645,7 +645,7 @@ impl Backend for GpuBackend<'_> {
         &mut self,
         call: &StageCall<'_>,
         slots: &mut Slots<GpuArray>,
-    ) -> Result<Option<Duration>, RunError> {
+    ) -> Result<StageMeasurement, RunError> {
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
         let builder = self.builder();
         let kernel = build_stage_kernel(self, call, slots, builder, &mut encoder)?;
@@ -704,7 +704,11 @@ impl Backend for GpuBackend<'_> {
         if self.profile {
             self.check_status()?;
         }
-        Ok(time)
+        // One kernel (and its sinks' passes) per stage: not split by op.
+        Ok(StageMeasurement {
+            device_time: time,
+            op_thread_times: Vec::new(),
+        })
     }
 
     fn to_column(&mut self, array: &GpuArray) -> Result<Arc<Column>, RunError> {
