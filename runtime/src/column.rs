@@ -127,9 +127,12 @@ impl Column {
             ElemType::U32 => Column::U32(vec![0; len]),
             ElemType::I32 => Column::I32(vec![0; len]),
             ElemType::F32 => Column::F32(vec![0.0; len]),
-            ElemType::Vec2 => Column::Vec2(vec![Vec2::ZERO; len]),
-            ElemType::Vec3 => Column::Vec3(vec![Vec3::ZERO; len]),
-            ElemType::Vec4 => Column::Vec4(vec![Vec4::ZERO; len]),
+            // Zeroed allocations, as `vec![0; len]` makes for scalars: a large
+            // one comes as fresh zero pages, so a frame's image is not
+            // cleared on one thread before the stage that fills it.
+            ElemType::Vec2 => Column::Vec2(bytemuck::zeroed_vec(len)),
+            ElemType::Vec3 => Column::Vec3(bytemuck::zeroed_vec(len)),
+            ElemType::Vec4 => Column::Vec4(bytemuck::zeroed_vec(len)),
             ElemType::Record(id) => Column::Record {
                 ty: id,
                 fields: records
