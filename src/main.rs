@@ -11,7 +11,7 @@ mod volume_setup;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use dpp_runtime::compile::plan_text::plan_to_text;
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext, StageTiming};
+use dpp_runtime::cpu::exec::{listed_op_shares, run_plan, OutputValue, RunContext, StageTiming};
 use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{compile_file, CompileOptions, FunctorLibrary, Plan};
 use std::path::PathBuf;
@@ -516,34 +516,24 @@ fn profile_report(
 
 /// Where a fused stage's time went, op by op (CPU backend): the time its
 /// chunks spent in each op, summed over threads, and that op's share of the
-/// stage's op time. Field views copy nothing and are left out; a stage of one
-/// op needs no split.
+/// stage's op time (`listed_op_shares`: field views and stages of one op are
+/// left out).
 fn op_split(timing: &StageTiming) -> String {
-    let ops: Vec<_> = timing
-        .ops
-        .iter()
-        .filter(|op| !op.label.starts_with('.'))
-        .collect();
-    let total: f64 = timing
-        .ops
-        .iter()
-        .map(|op| op.thread_time.as_secs_f64())
-        .sum();
-    if ops.len() < 2 || total <= 0.0 {
+    let shares = listed_op_shares(&timing.ops);
+    if shares.is_empty() {
         return String::new();
     }
     let mut text = format!(
         "{:>8}{:<28} {:>12}  {:>8}\n",
         "", "op", "thread ms", "of stage"
     );
-    for op in ops {
-        let seconds = op.thread_time.as_secs_f64();
+    for (op, share) in shares {
         text.push_str(&format!(
             "{:>8}{:<28} {:>12.2}  {:>7.1}%\n",
             "",
             op.label,
-            seconds * 1e3,
-            100.0 * seconds / total
+            op.thread_time.as_secs_f64() * 1e3,
+            100.0 * share
         ));
     }
     text

@@ -50,6 +50,21 @@ pub struct OpTiming {
     pub thread_time: Duration,
 }
 
+/// The ops of a stage's profile worth listing apart, each with its share of
+/// the stage's op time: none for a stage of one op (or one never timed), and
+/// no field views (`.field`: they copy nothing).
+pub fn listed_op_shares(ops: &[OpTiming]) -> Vec<(&OpTiming, f64)> {
+    let total: f64 = ops.iter().map(|op| op.thread_time.as_secs_f64()).sum();
+    let listed: Vec<&OpTiming> = ops.iter().filter(|op| !op.label.starts_with('.')).collect();
+    if listed.len() < 2 || total <= 0.0 {
+        return Vec::new();
+    }
+    listed
+        .into_iter()
+        .map(|op| (op, op.thread_time.as_secs_f64() / total))
+        .collect()
+}
+
 /// An op as a stage's profile names it: `name = map<f>` where its one output
 /// has a name in the pipeline, else the op alone (`map<f>`, `.field`).
 fn op_label(plan: &Plan, op: &Op) -> String {

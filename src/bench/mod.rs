@@ -19,7 +19,7 @@ mod report;
 
 use crate::scene_setup::{self, SceneRequest, SceneSetup};
 use crate::{volume_setup, Backend, Failure};
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext, RunResult, StageTiming};
+use dpp_runtime::cpu::exec::{run_plan, OpTiming, OutputValue, RunContext, RunResult, StageTiming};
 use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{CompileOptions, FunctorLibrary, Plan};
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
@@ -314,36 +314,9 @@ pub struct StageTime {
     pub label: String,
     /// Mean over the measured rounds.
     pub ms: f64,
-    /// Where a CPU stage's time went, op by op (`StageTiming::ops`); empty on the GPU.
-    pub ops: Vec<OpTime>,
-}
-
-/// The time a stage's chunks spent in one op, summed over threads; mean over
-/// the measured rounds.
-#[derive(Clone, Debug)]
-pub struct OpTime {
-    pub label: String,
-    pub thread_ms: f64,
-}
-
-impl StageTime {
-    /// The ops worth listing apart, with their shares of the stage's op time:
-    /// none for a stage of one op, and no field views (they copy nothing).
-    pub fn op_shares(&self) -> Vec<(&OpTime, f64)> {
-        let total: f64 = self.ops.iter().map(|op| op.thread_ms).sum();
-        let listed: Vec<&OpTime> = self
-            .ops
-            .iter()
-            .filter(|op| !op.label.starts_with('.'))
-            .collect();
-        if listed.len() < 2 || total <= 0.0 {
-            return Vec::new();
-        }
-        listed
-            .into_iter()
-            .map(|op| (op, op.thread_ms / total))
-            .collect()
-    }
+    /// Where a CPU stage's time went, op by op (`StageTiming::ops`, each
+    /// op's thread time a mean over the measured rounds); empty on the GPU.
+    pub ops: Vec<OpTiming>,
 }
 
 impl Measurement {
@@ -684,7 +657,7 @@ fn compile(path: &Path, library: &FunctorLibrary, fuse: bool) -> Result<Plan, Fa
     )
 }
 
-fn ms(duration: Duration) -> f64 {
+pub(crate) fn ms(duration: Duration) -> f64 {
     duration.as_secs_f64() * 1e3
 }
 
@@ -904,9 +877,9 @@ fn add_stages(stages: &mut Vec<StageTime>, profile: &[StageTiming], rounds: u32)
                 ops: t
                     .ops
                     .iter()
-                    .map(|op| OpTime {
+                    .map(|op| OpTiming {
                         label: op.label.clone(),
-                        thread_ms: 0.0,
+                        thread_time: Duration::ZERO,
                     })
                     .collect(),
             })
@@ -915,7 +888,7 @@ fn add_stages(stages: &mut Vec<StageTime>, profile: &[StageTiming], rounds: u32)
     for (stage, timing) in stages.iter_mut().zip(profile) {
         stage.ms += ms(timing.time) / f64::from(rounds);
         for (op, measured) in stage.ops.iter_mut().zip(&timing.ops) {
-            op.thread_ms += ms(measured.thread_time) / f64::from(rounds);
+            op.thread_time += measured.thread_time / rounds;
         }
     }
 }

@@ -1,7 +1,8 @@
 //! `dpp bench`'s results as markdown tables (in the manner of the paper's
 //! tables) and as JSON.
 
-use super::{Engine, Measurement, SceneResult, AGREEMENT};
+use super::{ms, Engine, Measurement, SceneResult, AGREEMENT};
+use dpp_runtime::cpu::exec::listed_op_shares;
 use dpp_runtime::gpu::GpuContext;
 use serde_json::{json, Value};
 use std::fmt::Write;
@@ -378,7 +379,7 @@ impl Report {
                     "ms": s.ms,
                     "op_thread_ms": s.ops.iter().map(|op| json!({
                         "op": op.label,
-                        "thread_ms": op.thread_ms,
+                        "thread_ms": ms(op.thread_time),
                     })).collect::<Vec<_>>(),
                 })).collect::<Vec<_>>(),
             });
@@ -498,11 +499,16 @@ fn write_op_split(md: &mut String, measurements: &[&Measurement], views: f64) {
             stages.iter().map(|s| value(s)).sum::<f64>() / views
         };
         let stage_ms = mean_of(&|s| s.ms);
-        let mut mean_stage = stage.clone();
-        for (position, op) in mean_stage.ops.iter_mut().enumerate() {
-            op.thread_ms = mean_of(&|s| s.ops.get(position).map_or(0.0, |o| o.thread_ms));
+        let mut mean_ops = stage.ops.clone();
+        for (position, op) in mean_ops.iter_mut().enumerate() {
+            let seconds = mean_of(&|s| {
+                s.ops
+                    .get(position)
+                    .map_or(0.0, |o| o.thread_time.as_secs_f64())
+            });
+            op.thread_time = std::time::Duration::from_secs_f64(seconds);
         }
-        let shares = mean_stage.op_shares();
+        let shares = listed_op_shares(&mean_ops);
         if shares.is_empty() {
             continue;
         }
@@ -518,7 +524,7 @@ fn write_op_split(md: &mut String, measurements: &[&Measurement], views: f64) {
                 md,
                 "| `{}` | {:.2} | {:.1}% | {:.1} |",
                 op.label,
-                op.thread_ms,
+                ms(op.thread_time),
                 100.0 * share,
                 share * stage_ms
             );

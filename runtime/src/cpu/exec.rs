@@ -30,7 +30,8 @@ pub struct RunContext<'a> {
 }
 
 pub use crate::interpret::{
-    OpTiming, OutputValue, RunError, RunResult, StageTiming, MAX_ELEMENTS, MAX_WHILE_ITERATIONS,
+    listed_op_shares, OpTiming, OutputValue, RunError, RunResult, StageTiming, MAX_ELEMENTS,
+    MAX_WHILE_ITERATIONS,
 };
 
 /// Runs `plan` on the CPU.
