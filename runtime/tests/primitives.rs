@@ -122,6 +122,15 @@ fn case_of_size(n: impl Strategy<Value = usize>) -> impl Strategy<Value = Case> 
     })
 }
 
+/// The same case of `n` elements on every run (proptest's deterministic runner).
+fn fixed_case(n: usize) -> Case {
+    let mut runner = proptest::test_runner::TestRunner::deterministic();
+    case_of_size(Just(n))
+        .new_tree(&mut runner)
+        .unwrap()
+        .current()
+}
+
 fn compile_case(case: &Case, library: &FunctorLibrary, fuse: bool) -> Plan {
     let overrides = vec![
         ("n".to_string(), case.n.to_string()),
@@ -352,11 +361,7 @@ proptest! {
 
 #[test]
 fn default_chunk_size_agrees_with_small_chunks() {
-    let mut runner = proptest::test_runner::TestRunner::deterministic();
-    let case = case_of_size(Just(4099))
-        .new_tree(&mut runner)
-        .unwrap()
-        .current();
+    let case = fixed_case(4099);
     let small = run(&case, true, 2, 64);
     check_against_reference(&case, &small);
     // A different chunk size may round float sums differently; integers must agree.
@@ -380,11 +385,7 @@ fn default_chunk_size_agrees_with_small_chunks() {
 /// time). A GPU stage is one kernel: no split.
 #[test]
 fn fused_stages_are_timed_op_by_op_on_the_cpu() {
-    let mut runner = proptest::test_runner::TestRunner::deterministic();
-    let case = case_of_size(Just(20_000))
-        .new_tree(&mut runner)
-        .unwrap()
-        .current();
+    let case = fixed_case(20_000);
     let library = library();
     let plan = compile_case(&case, &library, true);
     let result = run_result(&case, true, 2, dpp_runtime::cpu::kernels::DEFAULT_CHUNK);
@@ -457,11 +458,7 @@ fn arrays_split_into_segments_still_match() {
         max_binding_bytes: 3000,
         ..gpu.limits
     });
-    let mut runner = proptest::test_runner::TestRunner::deterministic();
-    let case = case_of_size(Just(1400))
-        .new_tree(&mut runner)
-        .unwrap()
-        .current();
+    let case = fixed_case(1400);
     check_against_reference(&case, &run_gpu(&case, true, &small));
     check_against_reference(&case, &run_gpu(&case, false, &small));
 }
@@ -476,11 +473,7 @@ fn many_workgroups_use_a_two_dimensional_dispatch() {
         max_workgroups_per_dimension: 16,
         ..gpu.limits
     });
-    let mut runner = proptest::test_runner::TestRunner::deterministic();
-    let case = case_of_size(Just(4099))
-        .new_tree(&mut runner)
-        .unwrap()
-        .current();
+    let case = fixed_case(4099);
     check_against_reference(&case, &run_gpu(&case, true, &narrow));
 }
 
@@ -494,11 +487,7 @@ fn runs_that_reuse_buffers_still_start_from_zero() {
     // A context with its own, empty pool, so that the runs below reuse each
     // other's buffers.
     let own_pool = gpu.with_limits(gpu.limits);
-    let mut runner = proptest::test_runner::TestRunner::deterministic();
-    let case = case_of_size(Just(4099))
-        .new_tree(&mut runner)
-        .unwrap()
-        .current();
+    let case = fixed_case(4099);
     for _ in 0..3 {
         check_against_reference(&case, &run_gpu(&case, true, &own_pool));
         check_against_reference(&case, &run_gpu(&case, false, &own_pool));
