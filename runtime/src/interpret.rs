@@ -68,11 +68,12 @@ pub fn listed_op_shares(ops: &[OpTiming]) -> Vec<(&OpTiming, f64)> {
 /// An op as a stage's profile names it: `name = map<f>` where its one output
 /// has a name in the pipeline, else the op alone (`map<f>`, `.field`).
 fn op_label(plan: &Plan, op: &Op) -> String {
+    let label = op.label();
     match op.outputs.as_slice() {
-        [output] if !plan.var(*output).name.starts_with('%') && !op.label().starts_with('.') => {
-            format!("{} = {}", plan.var(*output).name, op.label())
+        [output] if !plan.var(*output).name.starts_with('%') && !label.starts_with('.') => {
+            format!("{} = {label}", plan.var(*output).name)
         }
-        _ => op.label(),
+        _ => label,
     }
 }
 
