@@ -102,8 +102,6 @@ impl ChunkValue {
 /// What one chunk hands back to the stage.
 struct ChunkResult {
     range: Range<usize>,
-    /// One column per [`chunk_materialised`] variable.
-    materialised: Vec<Arc<Column>>,
     /// One part per sink of the stage, in stage order.
     sinks: Vec<SinkPart>,
     /// The chunk's claims, by claims group of [`DirectScatters`].
@@ -171,8 +169,24 @@ impl StageRun<'_, '_> {
         };
 
         let mut direct = self.direct_scatters(stage, host_values)?;
+        // Materialised values: each chunk copies its range into them, so no
+        // chunk keeps its columns to the end of the stage and nothing is
+        // joined after it.
+        let records = &self.context.library.records;
+        let variables = elementwise_materialised(stage);
+        let materialised: Vec<SharedTarget> = variables
+            .iter()
+            .map(|var| SharedTarget::new(Column::zeroed(self.elem_type(*var), len, records)))
+            .collect();
         let results = kernels::run_chunked(len, chunk, |range| {
-            self.run_chunk(stage, host_values, &direct, range)
+            self.run_chunk(
+                stage,
+                host_values,
+                &direct,
+                &variables,
+                &materialised,
+                range,
+            )
         })
         .into_iter()
         .collect::<Result<Vec<_>, RunError>>()?;
@@ -183,26 +197,8 @@ impl StageRun<'_, '_> {
             }
         }
 
-        // Materialised values: the chunks joined in order, variables in parallel.
-        let call = self.call;
-        let records = &self.context.library.records;
-        let variables = elementwise_materialised(stage);
-        let joined: Vec<Column> = {
-            use rayon::prelude::*;
-            variables
-                .par_iter()
-                .enumerate()
-                .map(|(position, var)| {
-                    let parts: Vec<ColumnView<'_>> = results
-                        .iter()
-                        .map(|r| r.materialised[position].view())
-                        .collect();
-                    Column::concat_views(call.elem_type(*var), &parts, records)
-                })
-                .collect()
-        };
-        for (var, column) in variables.into_iter().zip(joined) {
-            self.slots.set_array(var, Arc::new(column));
+        for (var, target) in variables.into_iter().zip(materialised) {
+            self.slots.set_array(var, Arc::new(target.into_column()));
         }
         let sinks = stage
             .ops
@@ -422,6 +418,8 @@ impl StageRun<'_, '_> {
         stage: &Stage,
         host_values: &[OpHostValues],
         direct: &DirectScatters,
+        materialised_variables: &[VarId],
+        materialised: &[SharedTarget],
         range: Range<usize>,
     ) -> Result<ChunkResult, RunError> {
         let records = &self.context.library.records;
@@ -613,17 +611,13 @@ impl StageRun<'_, '_> {
         if let Some(last) = op_times.last_mut() {
             *last = op_start.elapsed();
         }
-        let mut materialised = Vec::new();
-        for var in elementwise_materialised(stage) {
-            let value = lookup(&locals, var)?;
-            materialised.push(match value {
-                ChunkValue::Chunk(c) => c,
-                ChunkValue::Whole(c) => Arc::new(c.slice(range.clone()).to_column()),
-            });
+        for (var, target) in materialised_variables.iter().zip(materialised) {
+            target
+                .write_range(range.start, &lookup(&locals, *var)?.view(&range))
+                .map_err(|e| error(e.to_string()))?;
         }
         Ok(ChunkResult {
             range,
-            materialised,
             sinks,
             claims,
             op_times,

@@ -1,5 +1,7 @@
 //! A plain scatter done inside its stage's chunks, in parallel, with the
-//! sequential kernel's result: the last writer of a slot wins.
+//! sequential kernel's result: the last writer of a slot wins. The same
+//! shared target takes the values a stage materialises, each chunk writing
+//! its own range.
 //!
 //! Every target slot is owned by the first chunk that claims it. A chunk
 //! writes the slots it owns straight into the target, so no two threads write
@@ -207,17 +209,19 @@ impl Owners {
     }
 }
 
-/// The target of a plain scatter, written by many chunks at once, each only
-/// at the slots it owns.
+/// An array written by many chunks at once, each only at slots no other chunk
+/// writes: the target of a plain scatter (the slots a chunk owns), or a value
+/// its stage materialises (the chunk's own range).
 pub struct SharedTarget {
     target: Column,
+    len: usize,
     /// Base pointer of each primitive leaf of the target (its fields, in order,
     /// for a record), with the leaf's type.
     leaves: Vec<(ElemType, *mut u8)>,
 }
 
 // The leaves are written only at slots the writing chunk owns (see
-// `ScatterClaims`), so no two threads write one element.
+// `ScatterClaims`) or in its own range, so no two threads write one element.
 unsafe impl Sync for SharedTarget {}
 unsafe impl Send for SharedTarget {}
 
@@ -225,7 +229,12 @@ impl SharedTarget {
     pub fn new(mut target: Column) -> SharedTarget {
         let mut leaves = Vec::new();
         collect_leaves(&mut target, &mut leaves);
-        SharedTarget { target, leaves }
+        let len = target.len();
+        SharedTarget {
+            target,
+            len,
+            leaves,
+        }
     }
 
     pub fn elem_type(&self) -> ElemType {
@@ -251,6 +260,21 @@ impl SharedTarget {
                 write_leaves(&mut leaves, (0..indices.len()).filter(used), indices, src)
             }
         }
+    }
+
+    /// Copies `src` to the slots `start .. start + src.len()`, which no other
+    /// chunk writes (a chunk's own range of its stage).
+    pub fn write_range(&self, start: usize, src: &ColumnView<'_>) -> Result<(), KernelError> {
+        check_same_type(self.elem_type(), src.elem_type())?;
+        let end = start + src.len();
+        if end > self.len {
+            return Err(KernelError::LengthMismatch {
+                what: "the array a chunk writes its range of",
+                expected: end,
+                found: self.len,
+            });
+        }
+        copy_leaves(&mut self.leaves.iter(), start, src)
     }
 
     pub fn into_column(self) -> Column {
@@ -292,6 +316,28 @@ fn write_leaves<'l>(
             // length, and this chunk owns that slot (no other thread writes it).
             unsafe { pointer.add(indices[position] as usize).write(src[position]) };
         }
+        Ok(())
+    }, _ => unreachable!("records are split into fields"))
+}
+
+fn copy_leaves<'l>(
+    leaves: &mut impl Iterator<Item = &'l (ElemType, *mut u8)>,
+    start: usize,
+    src: &ColumnView<'_>,
+) -> Result<(), KernelError> {
+    if let ColumnView::Record { fields, .. } = src {
+        return fields
+            .iter()
+            .try_for_each(|field| copy_leaves(leaves, start, field));
+    }
+    let &(ty, pointer) = leaves.next().expect("one leaf per field");
+    with_element_type!(ty, primitive, T => {
+        let src = typed_slice::<T>(src)?;
+        // SAFETY: `start + src.len()` was checked against the target's length,
+        // and no other thread writes this range.
+        unsafe {
+            std::ptr::copy_nonoverlapping(src.as_ptr(), pointer.cast::<T>().add(start), src.len())
+        };
         Ok(())
     }, _ => unreachable!("records are split into fields"))
 }
@@ -377,6 +423,47 @@ mod tests {
         let indices = numbers(5, 1500, 40);
         let mask: Vec<bool> = numbers(6, 1500, 3).iter().map(|&n| n != 0).collect();
         check(&indices, Some(&mask), 40, 16);
+    }
+
+    #[test]
+    fn chunks_writing_their_ranges_in_parallel_make_the_whole_record_array() {
+        use crate::types::{RecordRegistry, RecordType};
+        let mut records = RecordRegistry::default();
+        let ty = records.register(RecordType {
+            name: "Pair".into(),
+            fields: vec![("id".into(), ElemType::U32), ("on".into(), ElemType::Bool)],
+            doc: String::new(),
+        });
+        let len = 1000;
+        let whole = Column::Record {
+            ty,
+            fields: vec![
+                Arc::new(Column::U32((0..len as u32).map(|v| v * 3).collect())),
+                Arc::new(Column::Bool((0..len).map(|v| v % 7 == 0).collect())),
+            ],
+        };
+        let target = SharedTarget::new(Column::zeroed(ElemType::Record(ty), len, &records));
+        (0..len).into_par_iter().step_by(64).for_each(|start| {
+            let range = start..(start + 64).min(len);
+            target.write_range(start, &whole.slice(range)).unwrap();
+        });
+        assert_eq!(target.into_column(), whole);
+    }
+
+    #[test]
+    fn a_range_past_the_end_or_of_another_type_is_an_error() {
+        let target = SharedTarget::new(Column::U32(vec![0; 4]));
+        let error = target
+            .write_range(2, &Column::U32(vec![1, 2, 3]).view())
+            .unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "the array a chunk writes its range of has length 4, expected 5"
+        );
+        assert!(target
+            .write_range(0, &Column::F32(vec![1.0]).view())
+            .is_err());
+        assert_eq!(target.into_column(), Column::U32(vec![0; 4]));
     }
 
     #[test]
