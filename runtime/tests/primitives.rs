@@ -46,6 +46,20 @@ pipeline primitives {
     out masked      = scatter(perm, a, mask: keep, len: n)
     out overwritten = scatter(idx, a, into: dst)
     out combined    = scatter<add>(idx, a, into: dst)
+    // A loop's scatters that rebind their own targets (the CPU backend moves
+    // such a target instead of copying it): one whose old value a gather of
+    // the same stage still reads, one whose old value nothing else reads.
+    acc     = iota(m) → map<u32Data>(column: 5)
+    seen    = fill(n, 0)
+    own     = iota(m) → map<u32Data>(column: 5)
+    for round in 0..2 {
+        seen = gather(idx, acc)
+        acc  = scatter(idx, a, into: acc)
+        own  = scatter<add>(idx, b, into: own)
+    }
+    out accSeen = seen
+    out accOverwritten = acc
+    out ownTwice = own
     out repeated    = scatter<repeat>(a, fanout: k)
     out lanes       = scatter<lane>(a, fanout: k)
     out total       = reduce<add>(a)
@@ -305,6 +319,16 @@ fn check_against_reference(case: &Case, outputs: &HashMap<String, OutputValue>) 
         "last writer wins"
     );
     assert_eq!(u32s(outputs, "combined"), combined);
+    let acc_seen: Vec<u32> = idx.iter().map(|&i| overwritten[i as usize]).collect();
+    assert_eq!(u32s(outputs, "accSeen"), acc_seen);
+    assert_eq!(u32s(outputs, "accOverwritten"), overwritten);
+    let mut own = dst.clone();
+    for _round in 0..2 {
+        for i in 0..*n {
+            own[idx[i] as usize] = own[idx[i] as usize].wrapping_add(b[i]);
+        }
+    }
+    assert_eq!(u32s(outputs, "ownTwice"), own);
     let repeated: Vec<u32> = a.iter().flat_map(|&x| std::iter::repeat_n(x, *k)).collect();
     assert_eq!(u32s(outputs, "repeated"), repeated);
     let lanes: Vec<u32> = (0..*n).flat_map(|_| 0..*k as u32).collect();

@@ -218,7 +218,7 @@ impl StageRun<'_, '_> {
 
     /// The targets of the stage's plain scatters, made before its chunks run.
     fn direct_scatters(
-        &self,
+        &mut self,
         stage: &Stage,
         host_values: &[OpHostValues],
     ) -> Result<DirectScatters, RunError> {
@@ -259,8 +259,11 @@ impl StageRun<'_, '_> {
         Ok(direct)
     }
 
-    /// What a scatter writes into: zeros, or a copy of its `into:` array.
-    fn scatter_target(&self, op: &Op, values: &OpHostValues) -> Result<Column, RunError> {
+    /// What a scatter writes into: zeros, or a copy of its `into:` array. A
+    /// scatter that rebinds its own target (`c = scatter(…, into: c)`) takes
+    /// the array out of the slot it replaces, where no other op of the stage
+    /// reads it, so the copy is only made if something else still holds it.
+    fn scatter_target(&mut self, op: &Op, values: &OpHostValues) -> Result<Column, RunError> {
         let OpKind::Scatter { target, .. } = &op.kind else {
             unreachable!("a scatter")
         };
@@ -270,7 +273,22 @@ impl StageRun<'_, '_> {
                 values.scatter_len.unwrap_or_default(),
                 &self.context.library.records,
             ),
-            ScatterTarget::Into(dst) => Arc::unwrap_or_clone(self.array(*dst)?.clone()),
+            ScatterTarget::Into(dst) => {
+                let read_in_stage = self
+                    .call
+                    .stage
+                    .ops
+                    .iter()
+                    .any(|other| !std::ptr::eq(other, op) && other.array_reads().contains(dst));
+                let array = if *dst == op.outputs[0] && !read_in_stage {
+                    let array = self.array(*dst)?.clone();
+                    self.slots.arrays[dst.0 as usize] = None;
+                    array
+                } else {
+                    self.array(*dst)?.clone()
+                };
+                Arc::unwrap_or_clone(array)
+            }
         })
     }
 
