@@ -829,6 +829,80 @@ fn packets_resolve_exact_ties_like_every_traversal() {
     }
 }
 
+/// Any-hit batches sort their rays into packets of one octant: shadow rays
+/// from a camera's hit points to two lights (interleaved, as `shadowRay`
+/// makes them) and short ambient-occlusion rays around each point (four
+/// per point, every octant) must be blocked exactly when the binary
+/// traversal says so, on every implementation, dead rays included.
+#[test]
+fn any_hit_packets_of_shadow_and_occlusion_rays_match_binary() {
+    use crate::camera::StandardView;
+    let mesh = builtin_scene(200).unwrap();
+    let bvh = Bvh::build(&mesh).unwrap();
+    let bounds = mesh.bounds().unwrap();
+    let lights = [
+        bounds.center() + Vec3::new(0.3, 1.0, 0.8) * bounds.diagonal(),
+        bounds.center() + Vec3::new(-0.9, 0.4, 0.5) * bounds.diagonal(),
+    ];
+    let mut random = SplitMix64::new(7);
+    let (mut shadow, mut occlusion) = (Vec::new(), Vec::new());
+    for camera_ray in camera_rays(&mesh, StandardView::Front, (96, 64)) {
+        let Some(hit) = bvh.intersect_closest_binary(&camera_ray) else {
+            continue;
+        };
+        let normal = mesh.face_normal(hit.prim as usize).normalize();
+        let normal = if normal.dot(camera_ray.direction) > 0.0 {
+            -normal
+        } else {
+            normal
+        };
+        let point = camera_ray.origin + hit.t * camera_ray.direction + 1e-4 * normal;
+        for light in lights {
+            shadow.push(Ray {
+                origin: point,
+                direction: light - point,
+                tmax: 1.0,
+            });
+        }
+        for _ in 0..4 {
+            let direction = Vec3::new(
+                random.range(-1.0, 1.0),
+                random.range(-1.0, 1.0),
+                random.range(-1.0, 1.0),
+            );
+            let direction = if direction.dot(normal) < 0.0 {
+                -direction
+            } else {
+                direction
+            };
+            occlusion.push(Ray {
+                origin: point,
+                direction,
+                tmax: 0.05 * bounds.diagonal(),
+            });
+        }
+    }
+    occlusion[5].tmax = 0.0;
+    shadow[9].tmax = -1.0;
+    for rays in [&shadow, &occlusion] {
+        let expected: Vec<bool> = rays
+            .iter()
+            .map(|ray| ray.tmax > 0.0 && bvh.occluded_binary(ray, ray.tmax))
+            .collect();
+        let blocked = expected.iter().filter(|&&b| b).count();
+        assert!(
+            blocked > rays.len() / 20 && blocked < rays.len() - rays.len() / 20,
+            "{blocked} of {}",
+            rays.len()
+        );
+        for isa in Isa::available() {
+            let mut got = Vec::with_capacity(rays.len());
+            bvh.occluded_batch_with(isa, rays.len(), |i| rays[i], |b| got.push(b));
+            assert_eq!(got, expected, "{isa:?}");
+        }
+    }
+}
+
 #[test]
 fn isa_detection() {
     let available = Isa::available();

@@ -18,7 +18,7 @@
 
 use super::simd::{Lanes, Lanes8, LanesExt, Portable};
 use super::{Bvh, BvhChild, BvhNode, BvhTriangle, PreparedRay, Ray, ROBUST_FAR_SCALE};
-use packet::{is_packet, trace_packet, PacketStack, MAX_PACKET};
+use packet::{is_packet, packet_key, single_rays_below, trace_packet, PacketStack, MAX_PACKET};
 
 mod packet;
 
@@ -350,9 +350,15 @@ unsafe fn batch_avx2<const ANY_HIT: bool>(
     batch::<_, _, ANY_HIT>(lanes, lanes, bvh, count, ray, sink)
 }
 
+/// Rays an any-hit batch sorts by [`packet_key`] at a time.
+const ANY_HIT_WINDOW: usize = 1024;
+
+/// A key no live ray has (dominant axes are 0 to 2).
+const DEAD_KEY: usize = 3;
+
 /// `S` tests boxes, `T` triangles. Closest-hit batches go `T::N` rays at a time
 /// as a packet where they can ([`is_packet`]: the coherent rays of a camera),
-/// else one by one.
+/// else one by one; any-hit batches as in [`any_hit_window`].
 #[inline(always)]
 fn batch<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
     boxes: S,
@@ -364,6 +370,26 @@ fn batch<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
 ) {
     let mut stack = Stack::new();
     let mut index = 0;
+    if ANY_HIT && count >= T::N {
+        let mut packet_stack = PacketStack::new();
+        while index < count {
+            let len = (count - index).min(ANY_HIT_WINDOW);
+            let found = any_hit_window(
+                boxes,
+                triangles,
+                bvh,
+                |i| ray(index + i),
+                len,
+                &mut packet_stack,
+                &mut stack,
+            );
+            for &hit in &found[..len] {
+                sink(hit);
+            }
+            index += len;
+        }
+        return;
+    }
     if !ANY_HIT && count >= T::N {
         let mut packet_stack = PacketStack::new();
         let unused = Ray {
@@ -379,7 +405,7 @@ fn batch<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
             let rays = &rays[..T::N];
             if is_packet(rays) {
                 let mut found = [None; MAX_PACKET];
-                trace_packet(
+                trace_packet::<S, T, false>(
                     boxes,
                     triangles,
                     bvh,
@@ -411,6 +437,80 @@ fn batch<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
         ));
         index += 1;
     }
+}
+
+/// Any-hit rays `ray(0..len)` (`len` up to [`ANY_HIT_WINDOW`]), sorted by
+/// [`packet_key`] (their order kept within a key) and traced as packets of up
+/// to `T::N` rays of one key: shadow rays from neighbouring points to one
+/// light, or ambient-occlusion rays of one octant, start close together and
+/// share much of their way. Packets of a few rays go one by one. A ray's
+/// answer is the single-ray traversal's, whichever way it goes: any hit ends
+/// at the first triangle found, and which one does not matter.
+#[inline(always)]
+fn any_hit_window<S: Lanes8, T: Lanes>(
+    boxes: S,
+    triangles: T,
+    bvh: &Bvh,
+    ray: impl Fn(usize) -> Ray,
+    len: usize,
+    packet_stack: &mut PacketStack,
+    stack: &mut Stack,
+) -> [Found; ANY_HIT_WINDOW] {
+    let unused = Ray {
+        origin: glam::Vec3::ZERO,
+        direction: glam::Vec3::Z,
+        tmax: 0.0,
+    };
+    let mut rays = [unused; ANY_HIT_WINDOW];
+    let mut keys = [DEAD_KEY as u8; ANY_HIT_WINDOW];
+    // Positions of each key's rays: a counting sort.
+    let mut starts = [0usize; 33];
+    for (i, (slot, key)) in rays.iter_mut().zip(&mut keys).take(len).enumerate() {
+        *slot = ray(i);
+        if slot.tmax > 0.0 {
+            *key = packet_key(slot) as u8;
+        }
+        starts[*key as usize + 1] += 1;
+    }
+    for key in 0..32 {
+        starts[key + 1] += starts[key];
+    }
+    let mut order = [0u16; ANY_HIT_WINDOW];
+    let mut next = starts;
+    for (i, &key) in keys[..len].iter().enumerate() {
+        order[next[key as usize]] = i as u16;
+        next[key as usize] += 1;
+    }
+    let mut found = [None; ANY_HIT_WINDOW];
+    for key in (0..32).filter(|&key| key != DEAD_KEY) {
+        for members in order[starts[key]..starts[key + 1]].chunks(T::N) {
+            if members.len() as u32 <= single_rays_below::<T>() {
+                for &i in members {
+                    found[i as usize] =
+                        trace::<S, T, true>(boxes, triangles, bvh, rays[i as usize], stack);
+                }
+                continue;
+            }
+            let mut packet = [unused; MAX_PACKET];
+            for (slot, &i) in packet.iter_mut().zip(members) {
+                *slot = rays[i as usize];
+            }
+            let mut packet_found = [None; MAX_PACKET];
+            trace_packet::<S, T, true>(
+                boxes,
+                triangles,
+                bvh,
+                &packet[..members.len()],
+                packet_stack,
+                stack,
+                &mut packet_found,
+            );
+            for (&i, &hit) in members.iter().zip(&packet_found) {
+                found[i as usize] = hit;
+            }
+        }
+    }
+    found
 }
 
 /// One ray, dispatched on its dominant axis like the binary traversal. Dead rays

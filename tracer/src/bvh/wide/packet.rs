@@ -1,10 +1,12 @@
 //! Packet traversal of the wide tree for coherent rays (a camera's primary rays:
 //! one origin, neighbouring directions, handed over by the Morton order in tiles
-//! of 16). One ray per lane: each child box is tested against the whole packet at
-//! once, and each triangle too, so the rays share a node's memory traffic and
-//! control flow. Where few rays of the packet remain in a subtree, they finish it
-//! one by one with the single-ray walk, which tests eight boxes or sixteen
-//! triangles at once instead.
+//! of 16; or any-hit rays of one octant from nearby points, such as shadow rays
+//! to a light). One ray per lane: each child box is tested against the whole
+//! packet at once, and each triangle too, so the rays share a node's memory
+//! traffic and control flow. Where few rays of the packet remain in a subtree,
+//! they finish it one by one with the single-ray walk, which tests eight boxes
+//! or sixteen triangles at once instead. An any-hit lane leaves the packet at
+//! its first hit.
 //!
 //! Each lane does the scalar tests' IEEE operations on its own ray, so distances,
 //! culling and hits per ray are exactly those of the single-ray traversal; ties
@@ -21,7 +23,7 @@ pub(super) const MAX_PACKET: usize = 16;
 
 /// A subtree that at most a quarter of a packet's rays enter is finished by
 /// single-ray walks (measured: 3 to 5 of 16 are about equally good).
-fn single_rays_below<T: Lanes>() -> u32 {
+pub(super) fn single_rays_below<T: Lanes>() -> u32 {
     (T::N / 4) as u32
 }
 
@@ -44,7 +46,7 @@ impl PacketStack {
 /// The case of `trace`'s dispatch (dominant axis) and the signs of a ray's
 /// direction: rays with equal keys and origins can travel together.
 #[inline(always)]
-fn packet_key(ray: &Ray) -> u32 {
+pub(super) fn packet_key(ray: &Ray) -> u32 {
     let d = ray.direction.abs();
     let axis = if d.x >= d.y && d.x >= d.z {
         0
@@ -69,9 +71,10 @@ pub(super) fn is_packet(rays: &[Ray]) -> bool {
     })
 }
 
-/// Traces `T::N` rays that pass [`is_packet`], each result to `found`.
+/// Traces up to `T::N` live rays with one [`packet_key`] (for closest hits,
+/// `T::N` that pass [`is_packet`]), each result to `found`.
 #[inline(always)]
-pub(super) fn trace_packet<S: Lanes8, T: Lanes>(
+pub(super) fn trace_packet<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
     boxes: S,
     lanes: T,
     bvh: &Bvh,
@@ -80,15 +83,35 @@ pub(super) fn trace_packet<S: Lanes8, T: Lanes>(
     single_stack: &mut Stack,
     found: &mut [Found; MAX_PACKET],
 ) {
+    macro_rules! on_axes {
+        ($kx:literal, $ky:literal, $kz:literal) => {
+            traverse_packet::<S, T, $kx, $ky, $kz, ANY_HIT>(
+                boxes,
+                lanes,
+                bvh,
+                rays,
+                stack,
+                single_stack,
+                found,
+            )
+        };
+    }
     match packet_key(&rays[0]) & 3 {
-        0 => traverse_packet::<S, T, 1, 2, 0>(boxes, lanes, bvh, rays, stack, single_stack, found),
-        1 => traverse_packet::<S, T, 2, 0, 1>(boxes, lanes, bvh, rays, stack, single_stack, found),
-        _ => traverse_packet::<S, T, 0, 1, 2>(boxes, lanes, bvh, rays, stack, single_stack, found),
+        0 => on_axes!(1, 2, 0),
+        1 => on_axes!(2, 0, 1),
+        _ => on_axes!(0, 1, 2),
     }
 }
 
 #[inline(always)]
-fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const KZ: usize>(
+fn traverse_packet<
+    S: Lanes8,
+    T: Lanes,
+    const KX: usize,
+    const KY: usize,
+    const KZ: usize,
+    const ANY_HIT: bool,
+>(
     boxes: S,
     lanes: T,
     bvh: &Bvh,
@@ -97,8 +120,9 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
     single_stack: &mut Stack,
     found: &mut [Found; MAX_PACKET],
 ) {
-    let n = T::N;
-    // The packet's constants, as `PreparedRay::new` computes them per ray.
+    // The packet's constants, as `PreparedRay::new` computes them per ray;
+    // lanes without a ray (any-hit packets may be short) stay zero and are
+    // never active, so no test's mask takes them.
     let mut rows = [[0.0f32; MAX_PACKET]; 7];
     for (lane, ray) in rays.iter().enumerate() {
         for axis in 0..3 {
@@ -142,7 +166,9 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
     let wide = &bvh.wide;
     let mut stack_len = 0usize;
     let mut current = 0u32;
-    let mut active = (1u32 << n) - 1;
+    let mut active = (1u32 << rays.len()) - 1;
+    // Any hit: the lanes that have found one, and left the packet.
+    let mut done = 0u32;
     'visit: loop {
         if active.count_ones() <= single_rays_below::<T>() {
             // Few rays left here: each finishes this subtree on its own.
@@ -160,7 +186,7 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
                     v: v_row[lane],
                 };
                 let prepared = PreparedRay::new::<KX, KY, KZ>(&rays[lane]);
-                let end = walk::<S, T, KX, KY, KZ, false>(
+                let end = walk::<S, T, KX, KY, KZ, ANY_HIT>(
                     boxes,
                     lanes,
                     bvh,
@@ -170,6 +196,9 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
                     single_stack,
                 );
                 best[lane] = end.best;
+                if ANY_HIT && end.best != NO_HIT {
+                    done |= 1 << lane;
+                }
                 closest_row[lane] = end.closest;
                 u_row[lane] = end.u;
                 v_row[lane] = end.v;
@@ -231,7 +260,7 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
             }
         } else {
             let mut group_index = (current & !LEAF) as usize;
-            loop {
+            'groups: loop {
                 let group = &wide.groups[group_index];
                 let mut triangles = group.valid;
                 while triangles != 0 {
@@ -245,6 +274,22 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
                     }
                     let crossing =
                         watertight::<T, KX, KY, KZ>(lanes, vertices, &origin, &shear, active);
+                    if ANY_HIT {
+                        // `t < tmax`, as the single-ray any-hit test.
+                        let hits = crossing.hits & lanes.lt(crossing.t, closest);
+                        let mut newly = hits;
+                        while newly != 0 {
+                            let ray = newly.trailing_zeros() as usize;
+                            newly &= newly - 1;
+                            best[ray] = group.first + lane as u32;
+                        }
+                        done |= hits;
+                        active &= !hits;
+                        if active == 0 {
+                            break 'groups;
+                        }
+                        continue;
+                    }
                     let hits = crossing.hits & lanes.le(crossing.t, closest);
                     if hits == 0 {
                         continue;
@@ -284,7 +329,7 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
             stack_len -= 1;
             let (node, rays_in) = stack.entries[stack_len];
             let t_entry = lanes.load_row(&stack.t_entry[stack_len]);
-            let still = rays_in & lanes.le(t_entry, limit);
+            let still = rays_in & lanes.le(t_entry, limit) & !done;
             if still != 0 {
                 current = node;
                 active = still;
@@ -298,6 +343,9 @@ fn traverse_packet<S: Lanes8, T: Lanes, const KX: usize, const KY: usize, const 
     for (lane, (ray, result)) in rays.iter().zip(found.iter_mut()).enumerate() {
         *result = if best[lane] == NO_HIT {
             None
+        } else if ANY_HIT {
+            // What the single-ray any-hit traversal returns.
+            Some((0, 0.0, 0.0, 0.0))
         } else {
             let index = best[lane] as usize;
             debug_assert_eq!(
