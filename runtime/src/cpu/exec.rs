@@ -173,20 +173,15 @@ impl StageRun<'_, '_> {
         // chunk keeps its columns to the end of the stage and nothing is
         // joined after it.
         let records = &self.context.library.records;
-        let variables = elementwise_materialised(stage);
-        let materialised: Vec<SharedTarget> = variables
-            .iter()
-            .map(|var| SharedTarget::new(Column::zeroed(self.elem_type(*var), len, records)))
+        let materialised: Vec<(VarId, SharedTarget)> = elementwise_materialised(stage)
+            .into_iter()
+            .map(|var| {
+                let array = Column::zeroed(self.elem_type(var), len, records);
+                (var, SharedTarget::new(array))
+            })
             .collect();
         let results = kernels::run_chunked(len, chunk, |range| {
-            self.run_chunk(
-                stage,
-                host_values,
-                &direct,
-                &variables,
-                &materialised,
-                range,
-            )
+            self.run_chunk(stage, host_values, &direct, &materialised, range)
         })
         .into_iter()
         .collect::<Result<Vec<_>, RunError>>()?;
@@ -197,7 +192,7 @@ impl StageRun<'_, '_> {
             }
         }
 
-        for (var, target) in variables.into_iter().zip(materialised) {
+        for (var, target) in materialised {
             self.slots.set_array(var, Arc::new(target.into_column()));
         }
         let sinks = stage
@@ -280,13 +275,11 @@ impl StageRun<'_, '_> {
                     .ops
                     .iter()
                     .any(|other| !std::ptr::eq(other, op) && other.array_reads().contains(dst));
-                let array = if *dst == op.outputs[0] && !read_in_stage {
-                    let array = self.array(*dst)?.clone();
+                let array = self.array(*dst)?.clone();
+                if *dst == op.outputs[0] && !read_in_stage {
+                    // The slot is about to be overwritten: it lets go of the array.
                     self.slots.arrays[dst.0 as usize] = None;
-                    array
-                } else {
-                    self.array(*dst)?.clone()
-                };
+                }
                 Arc::unwrap_or_clone(array)
             }
         })
@@ -436,8 +429,7 @@ impl StageRun<'_, '_> {
         stage: &Stage,
         host_values: &[OpHostValues],
         direct: &DirectScatters,
-        materialised_variables: &[VarId],
-        materialised: &[SharedTarget],
+        materialised: &[(VarId, SharedTarget)],
         range: Range<usize>,
     ) -> Result<ChunkResult, RunError> {
         let records = &self.context.library.records;
@@ -629,7 +621,7 @@ impl StageRun<'_, '_> {
         if let Some(last) = op_times.last_mut() {
             *last = op_start.elapsed();
         }
-        for (var, target) in materialised_variables.iter().zip(materialised) {
+        for (var, target) in materialised {
             target
                 .write_range(range.start, &lookup(&locals, *var)?.view(&range))
                 .map_err(|e| error(e.to_string()))?;
