@@ -353,8 +353,18 @@ unsafe fn batch_avx2<const ANY_HIT: bool>(
 /// Rays an any-hit batch sorts by [`packet_key`] at a time.
 const ANY_HIT_WINDOW: usize = 1024;
 
+/// Values a [`packet_key`] can take (5 bits).
+const PACKET_KEYS: usize = 32;
+
 /// A key no live ray has (dominant axes are 0 to 2).
 const DEAD_KEY: usize = 3;
+
+/// What fills the unused places of ray arrays: a dead ray.
+const UNUSED_RAY: Ray = Ray {
+    origin: glam::Vec3::ZERO,
+    direction: glam::Vec3::Z,
+    tmax: 0.0,
+};
 
 /// `S` tests boxes, `T` triangles. Closest-hit batches go `T::N` rays at a time
 /// as a packet where they can ([`is_packet`]: the coherent rays of a camera),
@@ -392,13 +402,8 @@ fn batch<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
     }
     if !ANY_HIT && count >= T::N {
         let mut packet_stack = PacketStack::new();
-        let unused = Ray {
-            origin: glam::Vec3::ZERO,
-            direction: glam::Vec3::Z,
-            tmax: 0.0,
-        };
         while count - index >= T::N {
-            let mut rays = [unused; MAX_PACKET];
+            let mut rays = [UNUSED_RAY; MAX_PACKET];
             for (i, slot) in rays[..T::N].iter_mut().enumerate() {
                 *slot = ray(index + i);
             }
@@ -456,15 +461,10 @@ fn any_hit_window<S: Lanes8, T: Lanes>(
     packet_stack: &mut PacketStack,
     stack: &mut Stack,
 ) -> [Found; ANY_HIT_WINDOW] {
-    let unused = Ray {
-        origin: glam::Vec3::ZERO,
-        direction: glam::Vec3::Z,
-        tmax: 0.0,
-    };
-    let mut rays = [unused; ANY_HIT_WINDOW];
+    let mut rays = [UNUSED_RAY; ANY_HIT_WINDOW];
     let mut keys = [DEAD_KEY as u8; ANY_HIT_WINDOW];
     // Positions of each key's rays: a counting sort.
-    let mut starts = [0usize; 33];
+    let mut starts = [0usize; PACKET_KEYS + 1];
     for (i, (slot, key)) in rays.iter_mut().zip(&mut keys).take(len).enumerate() {
         *slot = ray(i);
         if slot.tmax > 0.0 {
@@ -472,7 +472,7 @@ fn any_hit_window<S: Lanes8, T: Lanes>(
         }
         starts[*key as usize + 1] += 1;
     }
-    for key in 0..32 {
+    for key in 0..PACKET_KEYS {
         starts[key + 1] += starts[key];
     }
     let mut order = [0u16; ANY_HIT_WINDOW];
@@ -482,7 +482,7 @@ fn any_hit_window<S: Lanes8, T: Lanes>(
         next[key as usize] += 1;
     }
     let mut found = [None; ANY_HIT_WINDOW];
-    for key in (0..32).filter(|&key| key != DEAD_KEY) {
+    for key in (0..PACKET_KEYS).filter(|&key| key != DEAD_KEY) {
         for members in order[starts[key]..starts[key + 1]].chunks(T::N) {
             if members.len() as u32 <= single_rays_below::<T>() {
                 for &i in members {
@@ -491,7 +491,7 @@ fn any_hit_window<S: Lanes8, T: Lanes>(
                 }
                 continue;
             }
-            let mut packet = [unused; MAX_PACKET];
+            let mut packet = [UNUSED_RAY; MAX_PACKET];
             for (slot, &i) in packet.iter_mut().zip(members) {
                 *slot = rays[i as usize];
             }
