@@ -11,6 +11,7 @@ mod volume_setup;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use dpp_runtime::compile::plan_text::plan_to_text;
+use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{listed_op_shares, run_plan, OutputValue, RunContext, StageTiming};
 use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{compile_file, CompileOptions, FunctorLibrary, Plan};
@@ -352,6 +353,7 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 uniforms: &setup.uniforms,
                 resources: &setup.resources,
                 chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
+                column_pool: &ColumnPool::new(),
             };
             let run_start = Instant::now();
             let result = pool

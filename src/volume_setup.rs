@@ -3,6 +3,7 @@
 //! (`pipelines/isosurface.dpp`, built into the command so it runs anywhere;
 //! `--iso-pipeline` runs an edited copy instead).
 
+use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
 use dpp_runtime::{compile_file, compile_text, CompileOptions, FunctorLibrary};
 use dpp_tracer::functors::isosurface::{triangles_to_mesh, volume_uniforms, VolumeResources};
@@ -78,6 +79,7 @@ pub fn isosurface(
         uniforms: &uniforms,
         resources: &resources,
         chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
+        column_pool: &ColumnPool::new(),
     };
     let result = run_plan(&plan, &context).map_err(|e| format!("error: isosurface: {e}"))?;
     let Some((_, OutputValue::Array(triangles))) =

@@ -98,6 +98,23 @@ macro_rules! map_primitive {
 }
 
 impl Column {
+    /// A record of type `id` whose fields `make` builds from their types.
+    pub fn record_with(
+        id: RecordId,
+        records: &RecordRegistry,
+        mut make: impl FnMut(ElemType) -> Column,
+    ) -> Column {
+        Column::Record {
+            ty: id,
+            fields: records
+                .get(id)
+                .fields
+                .iter()
+                .map(|(_, field)| Arc::new(make(*field)))
+                .collect(),
+        }
+    }
+
     /// An empty column of type `ty` with room for `capacity` elements.
     pub fn with_capacity(ty: ElemType, capacity: usize, records: &RecordRegistry) -> Column {
         match ty {
@@ -108,15 +125,9 @@ impl Column {
             ElemType::Vec2 => Column::Vec2(Vec::with_capacity(capacity)),
             ElemType::Vec3 => Column::Vec3(Vec::with_capacity(capacity)),
             ElemType::Vec4 => Column::Vec4(Vec::with_capacity(capacity)),
-            ElemType::Record(id) => Column::Record {
-                ty: id,
-                fields: records
-                    .get(id)
-                    .fields
-                    .iter()
-                    .map(|(_, t)| Arc::new(Column::with_capacity(*t, capacity, records)))
-                    .collect(),
-            },
+            ElemType::Record(id) => Column::record_with(id, records, |field| {
+                Column::with_capacity(field, capacity, records)
+            }),
         }
     }
 
@@ -133,15 +144,9 @@ impl Column {
             ElemType::Vec2 => Column::Vec2(bytemuck::zeroed_vec(len)),
             ElemType::Vec3 => Column::Vec3(bytemuck::zeroed_vec(len)),
             ElemType::Vec4 => Column::Vec4(bytemuck::zeroed_vec(len)),
-            ElemType::Record(id) => Column::Record {
-                ty: id,
-                fields: records
-                    .get(id)
-                    .fields
-                    .iter()
-                    .map(|(_, t)| Arc::new(Column::zeroed(*t, len, records)))
-                    .collect(),
-            },
+            ElemType::Record(id) => {
+                Column::record_with(id, records, |field| Column::zeroed(field, len, records))
+            }
         }
     }
 

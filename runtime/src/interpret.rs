@@ -189,6 +189,12 @@ pub trait Backend {
 
     /// The array as a host column, for the run's outputs.
     fn to_column(&mut self, array: &Self::Array) -> Result<Arc<Column>, RunError>;
+
+    /// A slot lets go of `array` (it was rebound, or the run ended): a backend
+    /// that reuses memory takes it back here; the others drop it.
+    fn release(&mut self, array: Self::Array) {
+        drop(array);
+    }
 }
 
 /// Runs `plan` on `backend`.
@@ -239,6 +245,10 @@ pub fn interpret_with_inputs<B: Backend>(
         interpreter.slots.set_array(var, array);
     }
     interpreter.nodes(&plan.body)?;
+    // The outputs hold their own handles: every array left is the backend's.
+    for array in interpreter.slots.arrays.drain(..).flatten() {
+        interpreter.backend.release(array);
+    }
     let mut outputs = Vec::new();
     for name in &plan.outputs {
         match interpreter.outputs.iter().rev().find(|(n, _)| n == name) {
@@ -291,6 +301,13 @@ impl<A: Clone, B: Backend<Array = A>> HostEnvironment for Environment<'_, A, B> 
 }
 
 impl<'a, B: Backend> Interpreter<'a, B> {
+    /// Binds `dst` to `value`, handing the array it held to the backend.
+    fn store(&mut self, dst: VarId, value: B::Array) {
+        if let Some(old) = self.slots.arrays[dst.0 as usize].replace(value) {
+            self.backend.release(old);
+        }
+    }
+
     fn eval(&self, expr: &HostExpr) -> Result<HostValue, RunError> {
         let environment = Environment::<B::Array, B> {
             slots: &self.slots,
@@ -373,11 +390,11 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                             self.plan.var(*src).name
                         ))
                     })?;
-                    self.slots.set_array(*dst, view);
+                    self.store(*dst, view);
                 }
                 Node::Alias { dst, src } => {
                     let value = self.slots.array(self.plan, *src)?.clone();
-                    self.slots.set_array(*dst, value);
+                    self.store(*dst, value);
                 }
                 Node::For {
                     var,

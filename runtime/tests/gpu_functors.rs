@@ -9,6 +9,7 @@ mod common;
 
 use common::Data;
 use dpp_runtime::column::{ulp_distance, Scalar as Cell};
+use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
 use dpp_runtime::cpu::kernels::DEFAULT_CHUNK;
 use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
@@ -872,6 +873,7 @@ fn run_cpu(setup: &Setup, plan: &Plan, data: &Data) -> Result<RunResult, RunErro
         uniforms: &uniforms,
         resources: data,
         chunk: DEFAULT_CHUNK,
+        column_pool: &ColumnPool::new(),
     };
     run_plan(plan, &context)
 }

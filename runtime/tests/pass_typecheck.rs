@@ -13,6 +13,7 @@ use common::{check, diagnostics_text, trim_indent};
 use dpp_runtime::compile::ir::{node_reads, walk_nodes, Plan, VarType};
 use dpp_runtime::compile::plan_text::host_text;
 use dpp_runtime::compile::typecheck::node_writes;
+use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, RunContext};
 use dpp_runtime::*;
 use std::path::Path;
@@ -584,6 +585,7 @@ fn lengths_that_do_not_fold_are_checked_when_the_plan_runs() {
         uniforms: &uniforms,
         resources: &(),
         chunk: 64,
+        column_pool: &ColumnPool::new(),
     };
     let error = run_plan(&compile(source, &library).unwrap(), &context).unwrap_err();
     insta::assert_snapshot!(error.message, @"stage 2 [iota → map<add>]: length mismatch: `%2` has 5 elements, but the stage runs over 4");

@@ -4,6 +4,7 @@
 
 mod common;
 
+use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext, RunResult};
 use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuLimits, GpuRunContext};
 use dpp_runtime::*;
@@ -11,6 +12,7 @@ use proptest::prelude::*;
 use proptest::strategy::ValueTree;
 use std::collections::HashMap;
 use std::path::Path;
+use std::sync::Arc;
 
 fn library() -> FunctorLibrary {
     let mut library = common::library();
@@ -183,6 +185,16 @@ fn run(case: &Case, fuse: bool, threads: usize, chunk: usize) -> HashMap<String,
 }
 
 fn run_result(case: &Case, fuse: bool, threads: usize, chunk: usize) -> RunResult {
+    run_result_with_pool(case, fuse, threads, chunk, &ColumnPool::new())
+}
+
+fn run_result_with_pool(
+    case: &Case,
+    fuse: bool,
+    threads: usize,
+    chunk: usize,
+    column_pool: &ColumnPool,
+) -> RunResult {
     let library = library();
     let plan = compile_case(case, &library, fuse);
     let data = data_of(case);
@@ -192,6 +204,7 @@ fn run_result(case: &Case, fuse: bool, threads: usize, chunk: usize) -> RunResul
         uniforms: &uniforms,
         resources: &data,
         chunk,
+        column_pool,
     };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -516,6 +529,40 @@ fn runs_that_reuse_buffers_still_start_from_zero() {
         check_against_reference(&case, &run_gpu(&case, true, &own_pool));
         check_against_reference(&case, &run_gpu(&case, false, &own_pool));
     }
+}
+
+/// The CPU backend takes its arrays from a pool that earlier runs (and a
+/// loop's earlier rounds) gave theirs back to, old values and all: where a
+/// new array would be zero (a scatter's unwritten slots), the reused one must
+/// be cleared first. The pool starts full of arrays of every type and of
+/// lengths 1.5× apart, holding garbage, enough of each that every array the
+/// first run asks for is one of them.
+#[test]
+fn runs_that_reuse_cpu_arrays_still_start_from_zero() {
+    let case = fixed_case(4099);
+    let pool = ColumnPool::keeping_every_size();
+    let mut len = 1;
+    while len < 1 << 15 {
+        for _ in 0..16 {
+            for garbage in [
+                Column::Bool(vec![true; len]),
+                Column::U32(vec![0xdead_beef; len]),
+                Column::I32(vec![-7; len]),
+                Column::F32(vec![f32::NAN; len]),
+            ] {
+                pool.give(Arc::new(garbage));
+            }
+        }
+        len += len / 2 + 1;
+    }
+    for fuse in [true, false, true, false] {
+        let outputs: HashMap<_, _> = run_result_with_pool(&case, fuse, 2, 64, &pool)
+            .outputs
+            .into_iter()
+            .collect();
+        check_against_reference(&case, &outputs);
+    }
+    assert!(pool.reused() > 50, "only {} arrays reused", pool.reused());
 }
 
 /// Arrays come back from the device in read-back pieces of a few MiB (see

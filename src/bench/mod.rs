@@ -19,6 +19,7 @@ mod report;
 
 use crate::scene_setup::{self, SceneRequest, SceneSetup};
 use crate::{volume_setup, Backend, Failure};
+use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, OpTiming, OutputValue, RunContext, RunResult, StageTiming};
 use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{CompileOptions, FunctorLibrary, Plan};
@@ -791,6 +792,8 @@ fn measure(
     progress: &ProgressBar,
     keep_prims: bool,
 ) -> Result<(Measurement, Option<Hits>), Failure> {
+    // The frames reuse each other's arrays, as an interactive viewer's would.
+    let frame_pool = ColumnPool::new();
     // One frame: the whole run on the host, from the uniforms to the outputs in
     // host memory (the GPU backend returns once they are downloaded).
     let frame = |profile: bool| -> Result<(RunResult, Duration), Failure> {
@@ -802,6 +805,7 @@ fn measure(
                     uniforms: &view.uniforms,
                     resources: &view.resources,
                     chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
+                    column_pool: &frame_pool,
                 };
                 pool.install(|| run_plan(plan, &context))
             }

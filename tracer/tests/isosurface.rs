@@ -5,6 +5,7 @@
 //! or thread count.
 
 use dpp_runtime::compile::{compile_file, CompileOptions};
+use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
 use dpp_runtime::gpu::{gpu_for_tests, run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{Column, HostValue};
@@ -74,6 +75,7 @@ fn run_on(volume: &Volume, level: f64, fuse: bool, backend: Backend) -> Run {
                 uniforms: &uniforms,
                 resources: &resources,
                 chunk,
+                column_pool: &ColumnPool::new(),
             };
             run_plan(&plan, &context).unwrap()
         }

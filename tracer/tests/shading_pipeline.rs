@@ -4,6 +4,7 @@
 //! per pixel) changes the picture.
 
 use dpp_runtime::compile::{compile_file, CompileOptions};
+use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
 use dpp_tracer::shading::{Material, MeshMaterials};
 use dpp_tracer::{Camera, CameraSetup, PointLight, TraceResources, TraceScene, TriangleMesh};
@@ -96,6 +97,9 @@ fn render(
         uniforms: &uniforms,
         resources,
         chunk,
+        // Small arrays too, so that each bounce reuses the arrays of the one
+        // before it, as a full-size frame's do.
+        column_pool: &ColumnPool::keeping_every_size(),
     };
     let result = run_plan(&plan, &context).unwrap();
     let OutputValue::Array(image) = &result.outputs[0].1 else {

@@ -4,6 +4,7 @@
 //! does not materialise live only as chunk-sized columns. Each chunk times
 //! its ops, so a fused stage's profile still says where its time went.
 
+use super::column_pool::{ColumnPool, Contents};
 use super::kernels::{self, Element, ScanTotal};
 use super::shared_scatter::{Claimed, Owners, ScatterClaims, SharedTarget};
 use crate::column::{Column, ColumnView};
@@ -27,6 +28,9 @@ pub struct RunContext<'a> {
     pub resources: &'a (dyn Any + Send + Sync),
     /// Elements per chunk; [`kernels::DEFAULT_CHUNK`] unless a test wants smaller.
     pub chunk: usize,
+    /// Where the run's large arrays come from and go back to; a caller that
+    /// runs many frames keeps one pool for all of them.
+    pub column_pool: &'a ColumnPool,
 }
 
 pub use crate::interpret::{
@@ -79,6 +83,10 @@ impl Backend for CpuBackend<'_> {
 
     fn to_column(&mut self, array: &Arc<Column>) -> Result<Arc<Column>, RunError> {
         Ok(array.clone())
+    }
+
+    fn release(&mut self, array: Arc<Column>) {
+        self.context.column_pool.give(array);
     }
 }
 
@@ -168,6 +176,7 @@ impl StageRun<'_, '_> {
             _ => self.context.chunk,
         };
 
+        self.release_rebound_outputs();
         let mut direct = self.direct_scatters(stage, host_values)?;
         // Materialised values: each chunk copies its range into them, so no
         // chunk keeps its columns to the end of the stage and nothing is
@@ -176,7 +185,12 @@ impl StageRun<'_, '_> {
         let materialised: Vec<(VarId, SharedTarget)> = elementwise_materialised(stage)
             .into_iter()
             .map(|var| {
-                let array = Column::zeroed(self.elem_type(var), len, records);
+                let array = self.context.column_pool.take(
+                    self.elem_type(var),
+                    len,
+                    Contents::Overwritten,
+                    records,
+                );
                 (var, SharedTarget::new(array))
             })
             .collect();
@@ -193,7 +207,7 @@ impl StageRun<'_, '_> {
         }
 
         for (var, target) in materialised {
-            self.slots.set_array(var, Arc::new(target.into_column()));
+            self.store(var, target.into_column());
         }
         let sinks = stage
             .ops
@@ -209,6 +223,28 @@ impl StageRun<'_, '_> {
             }
         }
         Ok(op_times)
+    }
+
+    /// Binds `var` to `column`, giving the array it held back to the pool.
+    fn store(&mut self, var: VarId, column: Column) {
+        if let Some(old) = self.slots.arrays[var.0 as usize].replace(Arc::new(column)) {
+            self.context.column_pool.give(old);
+        }
+    }
+
+    /// Gives back, before the stage allocates, the arrays its outputs still
+    /// hold from an earlier run of the same code (a loop's previous round),
+    /// where no op of the stage reads them: the new values can use them.
+    fn release_rebound_outputs(&mut self) {
+        let ops = &self.call.stage.ops;
+        for output in ops.iter().flat_map(|op| &op.outputs) {
+            if ops.iter().any(|op| op.array_reads().contains(output)) {
+                continue;
+            }
+            if let Some(old) = self.slots.arrays[output.0 as usize].take() {
+                self.context.column_pool.give(old);
+            }
+        }
     }
 
     /// The targets of the stage's plain scatters, made before its chunks run.
@@ -263,9 +299,10 @@ impl StageRun<'_, '_> {
             unreachable!("a scatter")
         };
         Ok(match target {
-            ScatterTarget::Len(_) => Column::zeroed(
+            ScatterTarget::Len(_) => self.context.column_pool.take(
                 self.elem_type(op.outputs[0]),
                 values.scatter_len.unwrap_or_default(),
+                Contents::Zeroed,
                 &self.context.library.records,
             ),
             ScatterTarget::Into(dst) => {
@@ -328,7 +365,7 @@ impl StageRun<'_, '_> {
                     .map_err(|e| error(e.to_string()))?;
             }
         }
-        self.slots.set_array(op.outputs[0], Arc::new(dst));
+        self.store(op.outputs[0], dst);
         Ok(())
     }
 
@@ -366,7 +403,7 @@ impl StageRun<'_, '_> {
                     kernels::scatter_combine(*combine, indices.as_u32(), &values, mask, &mut dst)
                         .map_err(kernel_error)?;
                 }
-                self.slots.set_array(op.outputs[0], Arc::new(dst));
+                self.store(op.outputs[0], dst);
             }
             OpKind::Reduce { op: monoid } => {
                 let partials: Vec<Element> = results
@@ -396,27 +433,34 @@ impl StageRun<'_, '_> {
                     .collect();
                 let carries = kernels::scan_carries(*monoid, ty, &totals).map_err(kernel_error)?;
                 use rayon::prelude::*;
-                let parts = results
+                // Each chunk's scanned values go straight to their range of the result.
+                let len = self.call.len;
+                let target = SharedTarget::new(self.context.column_pool.take(
+                    ty,
+                    len,
+                    Contents::Overwritten,
+                    records,
+                ));
+                results
                     .par_iter()
                     .zip(carries)
-                    .map(|(result, carry)| {
+                    .try_for_each(|(result, carry)| {
                         let SinkPart::Scan { values, flags, .. } = &result.sinks[number] else {
                             unreachable!()
                         };
                         let range = result.range.clone();
                         let flags = flags.as_ref().map(|f| f.view(&range));
-                        kernels::scan_chunk(
+                        let part = kernels::scan_chunk(
                             *monoid,
                             &values.view(&range),
                             !exclusive,
                             carry,
                             flags.as_ref().map(|f| f.as_bool()),
-                        )
+                        )?;
+                        target.write_range(range.start, &part.view())
                     })
-                    .collect::<Result<Vec<Column>, _>>()
                     .map_err(kernel_error)?;
-                self.slots
-                    .set_array(op.outputs[0], Arc::new(Column::concat(ty, &parts, records)));
+                self.store(op.outputs[0], target.into_column());
             }
             _ => unreachable!("plain scatters finish in `finish_direct_scatter`"),
         }

@@ -5,6 +5,7 @@
 
 use dpp_runtime::compile::ir::{Node, Plan, VarInfo};
 use dpp_runtime::compile::plan_text::plan_to_text;
+use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
 use dpp_runtime::wgsl::{GpuBuffer, WgslRequest, WgslTwin};
 use dpp_runtime::*;
@@ -116,6 +117,7 @@ pub fn run(plan: &Plan, library: &FunctorLibrary) -> Result<String, String> {
         uniforms: &uniforms,
         resources: &(),
         chunk: 64,
+        column_pool: &ColumnPool::new(),
     };
     let result = run_plan(plan, &context).map_err(|e| e.message)?;
     Ok(result
