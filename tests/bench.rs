@@ -29,25 +29,35 @@ fn numbers(value: &serde_json::Value, path: &str, out: &mut Vec<(String, f64)>) 
     }
 }
 
+/// `dpp bench` of one measured round on the 16-cell built-in scene at 48×32,
+/// on 2 threads, in `dir`, with `more` arguments.
+fn tiny_bench(more: &[&str], dir: &std::path::Path) -> std::process::Output {
+    let pipelines = pipelines();
+    let mut args = vec![
+        "bench",
+        "builtin:16",
+        "--size",
+        "48x32",
+        "--warmup",
+        "0",
+        "--rounds",
+        "1",
+        "--threads",
+        "2",
+        "--pipelines",
+        &pipelines,
+    ];
+    args.extend_from_slice(more);
+    dpp(&args, dir)
+}
+
 #[test]
 fn a_tiny_bench_writes_tables_json_and_a_chart() {
     let dir = tempfile::tempdir().unwrap();
-    let output = dpp(
+    let output = tiny_bench(
         &[
-            "bench",
-            "builtin:16",
-            "--size",
-            "48x32",
             "--views",
             "front,zoom",
-            "--warmup",
-            "0",
-            "--rounds",
-            "1",
-            "--threads",
-            "2",
-            "--pipelines",
-            &pipelines(),
             "--markdown",
             "bench.md",
             "--json",
@@ -213,13 +223,13 @@ fn bad_bench_input_is_exit_status_2() {
     let output = dpp(&all, dir.path());
     assert_eq!(output.status.code(), Some(2));
     assert!(text(&output.stderr).contains("dpp reads .obj and .ply meshes"));
-    // Embree without the feature, or without WORKLOAD1.
+    // Embree without the feature, or without WORKLOAD1 or WORKLOAD3.
     let mut all: Vec<&str> = base.to_vec();
     all.extend_from_slice(&["--engine", "dpp,embree", "--workloads", "2"]);
     let output = dpp(&all, dir.path());
     assert_eq!(output.status.code(), Some(2));
     let expected = if cfg!(feature = "embree") {
-        "add 1 to --workloads"
+        "add 1 or 3 to --workloads"
     } else {
         "built without Embree"
     };
@@ -277,6 +287,53 @@ element face 1\nproperty list uchar int vertex_indices\nend_header\n"
     );
     assert_eq!(output.status.code(), Some(2));
     assert!(text(&output.stderr).contains("cut.ply: malformed PLY"));
+}
+
+/// With Embree, WORKLOAD1's intersection and WORKLOAD3's fused frame run
+/// again with Embree behind `intersect` and `occluded`, in both of its modes:
+/// the hits agree, and every stage that traces still has its thread time.
+#[cfg(feature = "embree")]
+#[test]
+fn an_embree_bench_compares_workload1_and_workload3() {
+    let dir = tempfile::tempdir().unwrap();
+    let more = [
+        "--views",
+        "front",
+        "--workloads",
+        "1,3",
+        "--engine",
+        "dpp,embree",
+        "--json",
+        "bench.json",
+    ];
+    let output = tiny_bench(&more, dir.path());
+    let markdown = text(&output.stdout);
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    for heading in [
+        "## WORKLOAD1: dpp against Embree",
+        "## WORKLOAD3: dpp against Embree, fused frame ms",
+    ] {
+        assert!(markdown.contains(heading), "{heading} missing:\n{markdown}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
+            .unwrap();
+    let view = &json["scenes"][0]["views"][0];
+    let engines = view["engines"].as_array().unwrap();
+    assert_eq!(engines.len(), 2);
+    assert!(engines.iter().all(|e| e["agree"] == true), "{engines:?}");
+    let traced = view["workload3_engines"].as_array().unwrap();
+    let names: Vec<&str> = traced
+        .iter()
+        .map(|e| e["engine"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["embree-single", "embree-packet"]);
+    for engine in traced {
+        assert!(engine["engine_over_dpp"].as_f64().unwrap() > 0.0);
+        for functor in ["intersect_thread_ms", "occluded_thread_ms"] {
+            assert!(engine[functor].as_f64().unwrap() > 0.0, "{engine}");
+        }
+    }
 }
 
 #[test]

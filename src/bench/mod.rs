@@ -7,7 +7,8 @@
 //! does nothing else) and over the whole frame; WORKLOAD2 and WORKLOAD3 report
 //! frames per second and the time of every stage. `--engine dpp,embree` (CPU
 //! only) also runs WORKLOAD1 with Embree behind `intersect` (single rays and
-//! 16-ray packets) and checks that both engines hit the same triangles.
+//! 16-ray packets) and checks that both engines hit the same triangles, and
+//! runs WORKLOAD3's fused plan with Embree behind `intersect` and `occluded`.
 //!
 //! On the CPU a frame's stage times come from the measured run itself. On the
 //! GPU, profiling waits for the device after every stage, so the measured
@@ -90,8 +91,9 @@ pub struct BenchArgs {
     /// offers once for the whole bench (`WGPU_BACKEND`, `WGPU_ADAPTER_NAME` choose).
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     backend: Backend,
-    /// Intersection engines for WORKLOAD1: `dpp`, or `dpp,embree` to compare with
-    /// Embree 3 (needs a build with `--features embree`; CPU backend only).
+    /// Intersection engines: `dpp`, or `dpp,embree` to compare WORKLOAD1 and
+    /// WORKLOAD3 with Embree 3 behind `intersect` (and `occluded`) (needs a
+    /// build with `--features embree`; CPU backend only).
     #[arg(long, default_value = "dpp")]
     engine: String,
     /// The isosurface level for volume files.
@@ -259,8 +261,11 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
             "error: --engine embree: this dpp was built without Embree; rebuild with `cargo build --release --features embree` (needs libembree-dev)".into(),
         );
     }
-    if embree && !workloads.contains(&1) {
-        return Err("error: --engine embree compares WORKLOAD1: add 1 to --workloads".into());
+    if embree && !workloads.contains(&1) && !workloads.contains(&3) {
+        return Err(
+            "error: --engine embree compares WORKLOAD1 and WORKLOAD3: add 1 or 3 to --workloads"
+                .into(),
+        );
     }
     if args.rounds == 0 {
         return Err("error: --rounds must be at least 1".into());
@@ -327,6 +332,18 @@ impl Measurement {
 
     pub fn fps(&self) -> f64 {
         1e3 / self.mean_ms()
+    }
+
+    /// The thread time (ms, summed over threads and stages) of the ops that
+    /// call `functor` in a map (CPU profiles).
+    pub fn map_thread_ms(&self, functor: &str) -> f64 {
+        let call = format!("map<{functor}>");
+        self.stages
+            .iter()
+            .flat_map(|s| &s.ops)
+            .filter(|op| op.label.ends_with(&call))
+            .map(|op| ms(op.thread_time))
+            .sum()
     }
 
     /// The mean time of the stage that is `map<intersect>` alone.
@@ -418,12 +435,22 @@ pub struct Hits {
     depth: Vec<f32>,
 }
 
+/// WORKLOAD3's fused plan with one engine behind `intersect` and `occluded`.
+#[derive(Clone, Debug)]
+pub struct TracedByEngine {
+    pub engine: Engine,
+    pub fused: Measurement,
+}
+
 #[derive(Clone, Debug)]
 pub struct ViewResult {
     pub view: String,
     pub rays: u64,
     pub workloads: Vec<WorkloadResult>,
+    /// WORKLOAD1's intersection with each engine.
     pub engines: Vec<EngineResult>,
+    /// WORKLOAD3 with each engine.
+    pub workload3_engines: Vec<TracedByEngine>,
 }
 
 impl ViewResult {
@@ -479,7 +506,15 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     // On the GPU the stage times come from as many profiled runs as measured ones.
     let profiled = if gpu.is_some() { args.rounds } else { 0 };
     let rounds = u64::from(args.warmup + args.rounds + profiled);
-    let per_view = 2 * setup.workloads.len() as u64 + if setup.embree { 4 } else { 0 };
+    // With Embree: WORKLOAD1 fused and unfused, WORKLOAD3 fused, for each of its two modes.
+    let embree_plans = |workload: u32, plans: u64| {
+        if setup.embree && setup.workloads.contains(&workload) {
+            2 * plans
+        } else {
+            0
+        }
+    };
+    let per_view = 2 * setup.workloads.len() as u64 + embree_plans(1, 2) + embree_plans(3, 1);
     let total = setup.scenes.len() as u64 * setup.views.len() as u64 * per_view * rounds;
     let progress = progress_bar(total);
 
@@ -522,6 +557,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 rays,
                 workloads: Vec::new(),
                 engines: Vec::new(),
+                workload3_engines: Vec::new(),
             };
             let mut dpp_prims = None;
             for (workload, _, fused, unfused) in &plans {
@@ -552,15 +588,32 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 });
             }
             #[cfg(feature = "embree")]
-            if let (Some(embree), Some(dpp_prims)) = (&embree, &dpp_prims) {
+            if let Some(embree) = &embree {
                 use dpp_tracer::functors::intersect_embree::{library_with_embree, EmbreeMode};
-                let path = &plans.iter().find(|p| p.0 == 1).expect("checked").1;
+                let path_of = |workload: u32| plans.iter().find(|p| p.0 == workload).map(|p| &p.1);
                 for (engine, mode) in [
                     (Engine::EmbreeSingle, EmbreeMode::Single),
                     (Engine::EmbreePacket, EmbreeMode::Packet16),
                 ] {
                     let swapped = library_with_embree(library, embree.clone(), mode)
                         .map_err(|e| Failure::Run(e.0))?;
+                    if let Some(path) = path_of(3) {
+                        progress.set_message(format!(
+                            "{} {view_name} workload3 {}",
+                            spec.name(),
+                            engine.name()
+                        ));
+                        let fused = compile(path, &swapped, true)?;
+                        let (fused, _) = measure(
+                            &fused, &swapped, &view, &pool, None, &args, &progress, false,
+                        )?;
+                        view_result
+                            .workload3_engines
+                            .push(TracedByEngine { engine, fused });
+                    }
+                    let (Some(path), Some(dpp_prims)) = (path_of(1), &dpp_prims) else {
+                        continue;
+                    };
                     let fused = compile(path, &swapped, true)?;
                     let unfused = compile(path, &swapped, false)?;
                     progress.set_message(format!(

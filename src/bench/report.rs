@@ -95,6 +95,69 @@ impl Report {
             .any(|v| !v.engines.is_empty())
     }
 
+    fn has_workload3_engines(&self) -> bool {
+        self.scenes
+            .iter()
+            .flat_map(|s| &s.views)
+            .any(|v| !v.workload3_engines.is_empty())
+    }
+
+    /// WORKLOAD3's fused frame with dpp's traversal and with Embree's.
+    fn write_workload3_engines(&self, md: &mut String) {
+        let _ = writeln!(md, "## WORKLOAD3: dpp against Embree, fused frame ms\n");
+        let _ = writeln!(md, "The fused WORKLOAD3 plan with Embree behind `intersect` and `occluded` (`rtcIntersect1` and `rtcOccluded1` per ray, or the 16-ray packet calls); everything else is the same. Ratio: Embree's time over dpp's. The last two columns are the thread time (ms, summed over the threads) inside the `map<intersect>` ops (camera and reflected rays, closest hit) and the `map<occluded>` ops (occlusion and shadow rays, any hit), dpp / Embree single / Embree packet.\n");
+        let _ = writeln!(md, "| scene | view | dpp | Embree single | Embree packet | single / dpp | packet / dpp | `intersect` thread ms | `occluded` thread ms |");
+        let _ = writeln!(
+            md,
+            "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+        );
+        for scene in &self.scenes {
+            for view in &scene.views {
+                let Some(own) = view.workloads.iter().find(|w| w.workload == 3) else {
+                    continue;
+                };
+                let engine = |e: Engine| {
+                    view.workload3_engines
+                        .iter()
+                        .find(|r| r.engine == e)
+                        .map(|r| &r.fused)
+                };
+                let (single, packet) = (engine(Engine::EmbreeSingle), engine(Engine::EmbreePacket));
+                let frame = |m: Option<&Measurement>| {
+                    m.map_or("–".into(), |m| format!("{:.1}", m.mean_ms()))
+                };
+                let ratio = |m: Option<&Measurement>| {
+                    m.map_or("–".into(), |m| {
+                        format!("{:.2}", m.mean_ms() / own.fused.mean_ms())
+                    })
+                };
+                let threads = |functor: &str| {
+                    [Some(&own.fused), single, packet]
+                        .iter()
+                        .map(|m| {
+                            m.map_or("–".into(), |m| format!("{:.0}", m.map_thread_ms(functor)))
+                        })
+                        .collect::<Vec<String>>()
+                        .join(" / ")
+                };
+                let _ = writeln!(
+                    md,
+                    "| {} | {} | {:.1} | {} | {} | {} | {} | {} | {} |",
+                    scene.name,
+                    view.view,
+                    own.fused.mean_ms(),
+                    frame(single),
+                    frame(packet),
+                    ratio(single),
+                    ratio(packet),
+                    threads("intersect"),
+                    threads("occluded"),
+                );
+            }
+        }
+        md.push('\n');
+    }
+
     pub fn markdown(&self) -> String {
         let mut md = String::new();
         let (width, height) = self.size;
@@ -294,6 +357,10 @@ impl Report {
             md.push('\n');
         }
 
+        if self.has_workload3_engines() {
+            self.write_workload3_engines(&mut md);
+        }
+
         let _ = writeln!(
             md,
             "## Time per stage, ms per frame (mean over the views)\n"
@@ -442,6 +509,16 @@ impl Report {
                                         "engine_t": finite(t),
                                     })).collect::<Vec<_>>(),
                                     "agree": e.agrees(),
+                                })
+                            }).collect::<Vec<_>>(),
+                            "workload3_engines": view.workload3_engines.iter().map(|e| {
+                                let own = view.workloads.iter().find(|w| w.workload == 3);
+                                json!({
+                                    "engine": e.engine.name(),
+                                    "fused": measurement(&e.fused, None),
+                                    "engine_over_dpp": own.map(|w| e.fused.mean_ms() / w.fused.mean_ms()),
+                                    "intersect_thread_ms": e.fused.map_thread_ms("intersect"),
+                                    "occluded_thread_ms": e.fused.map_thread_ms("occluded"),
                                 })
                             }).collect::<Vec<_>>(),
                         })

@@ -1,18 +1,23 @@
-//! The Embree engine (feature `embree`): an alternative `intersect` functor that
-//! asks Embree 3 for the closest hits, as the paper compared against Embree.
+//! The Embree engine (feature `embree`): alternative `intersect` and `occluded`
+//! functors that ask Embree 3 for the closest hits and for any hit, as the
+//! paper compared against Embree.
 //!
-//! The pipeline does not change: the same `map<intersect>` stage runs over the
-//! same chunks of rays, and only the functor behind the name `intersect` is
-//! swapped ([`library_with_embree`]). The hits mean the same as our CPU's: `t`,
+//! The pipeline does not change: the same `map<intersect>` and `map<occluded>`
+//! stages run over the same chunks of rays, and only the functors behind those
+//! names are swapped ([`library_with_embree`]). The hits mean the same as our CPU's: `t`,
 //! the triangle in file order (Embree's `primID`, since the index buffer is the
 //! mesh's triangles in file order), and the barycentrics `u` of `v1` and `v` of
 //! `v2`; dead rays (`tmax <= 0`, or NaN) miss without a query. Embree counts hits
 //! with `0 <= t <= tmax` where our traversal takes `0 < t < tmax`: the two differ
 //! only for a hit exactly at either end.
 //!
-//! Two modes: [`EmbreeMode::Single`] calls `rtcIntersect1` once per ray (the
-//! paper's single-ray comparison), [`EmbreeMode::Packet16`] hands Embree 16 rays
-//! at a time through `rtcIntersect16` (its packet mode; dead rays are masked out).
+//! `occluded` is `rtcOccluded1`/`rtcOccluded16` on the segment `0 ..= tmax`,
+//! where ours is blocked by a hit with `0 < t < tmax`.
+//!
+//! Two modes: [`EmbreeMode::Single`] calls `rtcIntersect1` (`rtcOccluded1`) once
+//! per ray (the paper's single-ray comparison), [`EmbreeMode::Packet16`] hands
+//! Embree 16 rays at a time through `rtcIntersect16` (`rtcOccluded16`), its
+//! packet mode; dead rays are masked out.
 
 use crate::functors::{hit_fields, record_fields_mut, RayColumns};
 use crate::mesh::{MeshError, TriangleMesh};
@@ -149,6 +154,31 @@ fn embree_ray(rays: &RayColumns<'_>, index: usize) -> Ray {
     )
 }
 
+/// Rays `start .. start + lanes` into the first lanes of `packet`; the mask
+/// of the live ones (`tmax > 0`).
+fn load_packet(
+    packet: &mut Ray16,
+    rays: &RayColumns<'_>,
+    start: usize,
+    lanes: usize,
+) -> ValidMaskN<16> {
+    let mut valid = ValidMaskN::<16>::new([ValidMask::Invalid; 16]);
+    for lane in 0..lanes {
+        let index = start + lane;
+        packet.set_org(lane, rays.origin[index].to_array());
+        packet.set_dir(lane, rays.dir[index].to_array());
+        packet.set_tnear(lane, 0.0);
+        packet.set_tfar(lane, rays.tmax[index]);
+        packet.set_time(lane, 0.0);
+        packet.set_mask(lane, u32::MAX);
+        packet.set_flags(lane, 0);
+        if rays.tmax[index] > 0.0 {
+            valid.lanes_mut()[lane] = ValidMask::Valid;
+        }
+    }
+    valid
+}
+
 impl Functor for EmbreeIntersect {
     fn signature(&self) -> &Signature {
         &self.signature
@@ -207,26 +237,9 @@ impl Functor for EmbreeIntersect {
                 };
                 for start in (0..n).step_by(16) {
                     let lanes = (n - start).min(16);
-                    let mut valid = ValidMaskN::<16>::new([ValidMask::Invalid; 16]);
-                    for lane in 0..16 {
-                        packet.hit.geomID[lane] = INVALID_ID;
-                        packet.hit.primID[lane] = INVALID_ID;
-                        if lane >= lanes {
-                            continue;
-                        }
-                        let index = start + lane;
-                        let ray = &mut packet.ray;
-                        ray.set_org(lane, rays.origin[index].to_array());
-                        ray.set_dir(lane, rays.dir[index].to_array());
-                        ray.set_tnear(lane, 0.0);
-                        ray.set_tfar(lane, rays.tmax[index]);
-                        ray.set_time(lane, 0.0);
-                        ray.set_mask(lane, u32::MAX);
-                        ray.set_flags(lane, 0);
-                        if rays.tmax[index] > 0.0 {
-                            valid.lanes_mut()[lane] = ValidMask::Valid;
-                        }
-                    }
+                    packet.hit.geomID = [INVALID_ID; 16];
+                    packet.hit.primID = [INVALID_ID; 16];
+                    let valid = load_packet(&mut packet.ray, &rays, start, lanes);
                     scene.intersect16(&mut context, &mut packet, &valid);
                     for lane in 0..lanes {
                         let hit = (packet.hit.geomID[lane] != INVALID_ID).then(|| {
@@ -246,30 +259,87 @@ impl Functor for EmbreeIntersect {
     }
 }
 
-/// A copy of `library` in which `intersect` is answered by Embree (every other
-/// functor, record and uniform is the same).
+/// `occluded` through Embree; see the module documentation.
+pub struct EmbreeOccluded {
+    signature: Signature,
+    scene: Arc<EmbreeScene>,
+    mode: EmbreeMode,
+}
+
+impl Functor for EmbreeOccluded {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        _ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        let rays = RayColumns::new(&inputs[0]);
+        let n = rays.len();
+        let blocked = outputs[0].as_bool_mut();
+        blocked.reserve(n);
+        let scene = &self.scene.scene;
+        // Shadow and occlusion rays leave from many points: not coherent.
+        let mut context = IntersectContext::incoherent();
+        match self.mode {
+            EmbreeMode::Single => {
+                for index in 0..n {
+                    blocked.push(
+                        rays.tmax[index] > 0.0
+                            && scene.occluded(&mut context, &mut embree_ray(&rays, index)),
+                    );
+                }
+            }
+            EmbreeMode::Packet16 => {
+                let mut packet = Ray16::empty();
+                for start in (0..n).step_by(16) {
+                    let lanes = (n - start).min(16);
+                    let valid = load_packet(&mut packet, &rays, start, lanes);
+                    scene.occluded16(&mut context, &mut packet, &valid);
+                    // Embree marks a blocked ray by setting its `tfar` to -inf.
+                    blocked.extend((0..lanes).map(|lane| packet.tfar(lane) == f32::NEG_INFINITY));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A copy of `library` in which `intersect` and `occluded` are answered by
+/// Embree (every other functor, record and uniform is the same).
 pub fn library_with_embree(
     library: &FunctorLibrary,
     scene: Arc<EmbreeScene>,
     mode: EmbreeMode,
 ) -> Result<FunctorLibrary, FunctorError> {
-    let intersect = library.get("intersect").ok_or_else(|| {
-        FunctorError("the library has no `intersect` functor to replace".to_string())
-    })?;
-    let embree: Arc<dyn Functor> = Arc::new(EmbreeIntersect::new(
-        intersect.signature().clone(),
-        scene,
+    let signature = |name: &str| {
+        library
+            .get(name)
+            .map(|functor| functor.signature().clone())
+            .ok_or_else(|| FunctorError(format!("the library has no `{name}` functor to replace")))
+    };
+    let intersect: Arc<dyn Functor> = Arc::new(EmbreeIntersect::new(
+        signature("intersect")?,
+        scene.clone(),
         mode,
     ));
+    let occluded: Arc<dyn Functor> = Arc::new(EmbreeOccluded {
+        signature: signature("occluded")?,
+        scene,
+        mode,
+    });
     let mut swapped = FunctorLibrary::default();
     swapped.records = library.records.clone();
     swapped.uniforms = library.uniforms.clone();
     for functor in library.iter() {
-        if functor.signature().name == "intersect" {
-            swapped.register(embree.clone());
-        } else {
-            swapped.register(functor.clone());
-        }
+        swapped.register(match functor.signature().name {
+            "intersect" => intersect.clone(),
+            "occluded" => occluded.clone(),
+            _ => functor.clone(),
+        });
     }
     Ok(swapped)
 }
@@ -279,10 +349,18 @@ mod tests {
     use super::*;
     use crate::functors::test_support::{probe_rays, read_rays, Fixture};
     use crate::functors::MISS_PRIM;
+    use dpp_runtime::ElemType;
 
-    /// Runs `intersect` of `library` on `rays` in the fixture's context.
-    fn hits(fixture: &Fixture, library: &FunctorLibrary, rays: &Column) -> Vec<Vec<f32>> {
-        let functor = library.get("intersect").unwrap();
+    /// Runs functor `name` of `library` on `rays` in the fixture's context;
+    /// its output, of type `output`.
+    fn run_on_rays(
+        fixture: &Fixture,
+        library: &FunctorLibrary,
+        name: &str,
+        output: ElemType,
+        rays: &Column,
+    ) -> Column {
+        let functor = library.get(name).unwrap();
         let ctx = CallContext {
             named: &[],
             uniforms: &fixture.uniforms,
@@ -291,13 +369,15 @@ mod tests {
             group: 1,
             records: &library.records,
         };
-        let mut outputs = vec![Column::with_capacity(
-            fixture.record("Hit"),
-            0,
-            &library.records,
-        )];
+        let mut outputs = vec![Column::with_capacity(output, 0, &library.records)];
         functor.run_cpu(&ctx, &[rays.view()], &mut outputs).unwrap();
-        let view = outputs[0].view();
+        outputs.remove(0)
+    }
+
+    /// `intersect` of `library` on `rays`: each field of the hits.
+    fn hits(fixture: &Fixture, library: &FunctorLibrary, rays: &Column) -> Vec<Vec<f32>> {
+        let hits = run_on_rays(fixture, library, "intersect", fixture.record("Hit"), rays);
+        let view = hits.view();
         vec![
             view.field(0).as_f32().to_vec(),
             view.field(1).as_u32().iter().map(|&p| p as f32).collect(),
@@ -332,15 +412,39 @@ mod tests {
     }
 
     #[test]
+    fn embree_occlusion_means_what_the_cpu_occlusion_means() {
+        let fixture = Fixture::new();
+        let scene = Arc::new(EmbreeScene::build(&fixture.resources.scene.mesh).unwrap());
+        let mut rays = read_rays(&probe_rays(&fixture));
+        rays = rays.iter().cycle().take(37).copied().collect();
+        rays[4].tmax = 0.0;
+        rays[20].tmax = f32::NAN;
+        let rays = fixture.rays(&rays);
+        let blocked = |library: &FunctorLibrary| {
+            let blocked = run_on_rays(&fixture, library, "occluded", ElemType::Bool, &rays);
+            blocked.view().as_bool().to_vec()
+        };
+        let expected = blocked(&fixture.library);
+        assert!(expected.contains(&true) && expected.contains(&false));
+        assert!(!expected[4] && !expected[20], "dead rays are never blocked");
+        for mode in [EmbreeMode::Single, EmbreeMode::Packet16] {
+            let library = library_with_embree(&fixture.library, scene.clone(), mode).unwrap();
+            assert_eq!(blocked(&library), expected, "{mode:?}");
+        }
+    }
+
+    #[test]
     fn the_swapped_library_keeps_every_other_functor() {
         let fixture = Fixture::new();
         let scene = Arc::new(EmbreeScene::build(&fixture.resources.scene.mesh).unwrap());
         let library = library_with_embree(&fixture.library, scene, EmbreeMode::Single).unwrap();
         let names = |l: &FunctorLibrary| l.names().collect::<Vec<_>>();
         assert_eq!(names(&library), names(&fixture.library));
-        assert_eq!(
-            library.get("intersect").unwrap().signature(),
-            fixture.library.get("intersect").unwrap().signature()
-        );
+        for name in ["intersect", "occluded"] {
+            assert_eq!(
+                library.get(name).unwrap().signature(),
+                fixture.library.get(name).unwrap().signature()
+            );
+        }
     }
 }
