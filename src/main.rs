@@ -518,8 +518,8 @@ fn profile_report(
 
 /// Where a fused stage's time went, op by op (CPU backend): the time its
 /// chunks spent in each op, summed over threads, and that op's share of the
-/// stage's op time (`listed_op_shares`: field views and stages of one op are
-/// left out).
+/// stage's op time (`listed_op_shares`: field views, and stages of one op
+/// that store nothing, are left out).
 fn op_split(timing: &StageTiming) -> String {
     let shares = listed_op_shares(&timing.ops);
     if shares.is_empty() {

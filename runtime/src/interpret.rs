@@ -51,8 +51,8 @@ pub struct OpTiming {
 }
 
 /// The ops of a stage's profile worth listing apart, each with its share of
-/// the stage's op time: none for a stage of one op (or one never timed), and
-/// no field views (`.field`: they copy nothing).
+/// the stage's op time: none for a stage of one op that stores nothing (or
+/// one never timed), and no field views (`.field`: they copy nothing).
 pub fn listed_op_shares(ops: &[OpTiming]) -> Vec<(&OpTiming, f64)> {
     let total: f64 = ops.iter().map(|op| op.thread_time.as_secs_f64()).sum();
     let listed: Vec<&OpTiming> = ops.iter().filter(|op| !op.label.starts_with('.')).collect();
@@ -77,14 +77,29 @@ fn op_label(plan: &Plan, op: &Op) -> String {
     }
 }
 
+/// The profile's name for a stage's copying of the element-wise values it
+/// stores: `store` and the values' names (`store hits, surf`).
+fn store_label(plan: &Plan, stage: &Stage) -> String {
+    let names: Vec<&str> = elementwise_materialised(stage)
+        .into_iter()
+        .map(|var| plan.var(var).name.as_str())
+        .filter(|name| !name.starts_with('%'))
+        .collect();
+    match names.as_slice() {
+        [] => "store".to_string(),
+        _ => format!("store {}", names.join(", ")),
+    }
+}
+
 /// What a backend measured of one run of a stage.
 #[derive(Clone, Debug, Default)]
 pub struct StageMeasurement {
     /// Device time, when the backend measured one itself (GPU timestamps);
     /// otherwise the interpreter takes the host's wall time.
     pub device_time: Option<Duration>,
-    /// Per op of the stage, in stage order, summed over threads; empty where
-    /// the backend cannot split a stage.
+    /// Per op of the stage, in stage order, summed over threads, then, where
+    /// the stage stores element-wise values, the time spent copying them into
+    /// their arrays; empty where the backend cannot split a stage.
     pub op_thread_times: Vec<Duration>,
 }
 
@@ -356,11 +371,15 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                     timing.elements += elements as u64;
                     timing.time += measured.device_time.unwrap_or_else(|| start.elapsed());
                     if timing.ops.is_empty() && !measured.op_thread_times.is_empty() {
-                        timing.ops = stage
-                            .ops
-                            .iter()
-                            .map(|op| OpTiming {
-                                label: op_label(self.plan, op),
+                        let mut labels: Vec<String> =
+                            stage.ops.iter().map(|op| op_label(self.plan, op)).collect();
+                        if measured.op_thread_times.len() > stage.ops.len() {
+                            labels.push(store_label(self.plan, stage));
+                        }
+                        timing.ops = labels
+                            .into_iter()
+                            .map(|label| OpTiming {
+                                label,
                                 thread_time: Duration::ZERO,
                             })
                             .collect();

@@ -199,7 +199,9 @@ impl StageRun<'_, '_> {
         })
         .into_iter()
         .collect::<Result<Vec<_>, RunError>>()?;
-        let mut op_times = vec![Duration::ZERO; stage.ops.len()];
+        // One entry per op, and one for storing the materialised values.
+        let timed = stage.ops.len() + usize::from(!materialised.is_empty());
+        let mut op_times = vec![Duration::ZERO; timed];
         for result in &results {
             for (total, time) in op_times.iter_mut().zip(&result.op_times) {
                 *total += *time;
@@ -665,10 +667,14 @@ impl StageRun<'_, '_> {
         if let Some(last) = op_times.last_mut() {
             *last = op_start.elapsed();
         }
-        for (var, target) in materialised {
-            target
-                .write_range(range.start, &lookup(&locals, *var)?.view(&range))
-                .map_err(|e| error(e.to_string()))?;
+        if !materialised.is_empty() {
+            let store_start = Instant::now();
+            for (var, target) in materialised {
+                target
+                    .write_range(range.start, &lookup(&locals, *var)?.view(&range))
+                    .map_err(|e| error(e.to_string()))?;
+            }
+            op_times.push(store_start.elapsed());
         }
         Ok(ChunkResult {
             range,
