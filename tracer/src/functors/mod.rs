@@ -237,6 +237,34 @@ impl<'a> RayWriter<'a> {
     }
 }
 
+impl RayWriter<'_> {
+    /// Appends `groups * lanes` records in one pass, as [`RayWriter::extend_with`]:
+    /// `group(g)` is called once per group, before its lanes, and record
+    /// `g * lanes + lane` is what the closure it returns gives for `lane`. What a
+    /// fan-out's rays share (their surface, origin and frame) is computed once.
+    #[inline(always)]
+    pub fn extend_groups<Lanes: FnMut(usize) -> RayRecord>(
+        &mut self,
+        groups: usize,
+        lanes: usize,
+        mut group: impl FnMut(usize) -> Lanes,
+    ) {
+        if groups == 0 || lanes == 0 {
+            return;
+        }
+        let (mut index, mut lane) = (0, 0);
+        let mut current = group(0);
+        self.extend_with(groups * lanes, |_| {
+            if lane == lanes {
+                (index, lane) = (index + 1, 0);
+                current = group(index);
+            }
+            lane += 1;
+            current(lane - 1)
+        });
+    }
+}
+
 /// The first `len` elements of `column`'s spare capacity (reserved here), to be
 /// written and then appended with [`commit`].
 #[inline(always)]
@@ -810,5 +838,31 @@ pub(crate) mod test_support {
             ));
         }
         Ok(twin)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::test_support::{ray, read_rays, Fixture};
+    use super::RayWriter;
+    use glam::Vec3;
+
+    /// A fan-out's groups come out group after group, lane after lane, and
+    /// each group's shared part is made once, before its lanes.
+    #[test]
+    fn grouped_rays_are_written_in_group_then_lane_order() {
+        let fixture = Fixture::new();
+        let mut column = fixture.rays(&[]);
+        let mut groups_made = Vec::new();
+        let mut writer = RayWriter::new(&mut column, 0).unwrap();
+        writer.extend_groups(3, 2, |group| {
+            groups_made.push(group);
+            move |lane| ray(Vec3::ZERO, Vec3::Z, 1.0, (10 * group + lane) as u32)
+        });
+        writer.extend_groups(0, 2, |_| |_| unreachable!("no groups"));
+        writer.extend_groups(2, 0, |_| |_| unreachable!("no lanes"));
+        let samples: Vec<u32> = read_rays(&column).iter().map(|r| r.sample).collect();
+        assert_eq!(samples, [0, 1, 10, 11, 20, 21]);
+        assert_eq!(groups_made, [0, 1, 2]);
     }
 }

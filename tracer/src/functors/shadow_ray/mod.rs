@@ -85,32 +85,30 @@ impl Functor for ShadowRay {
         let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "shadowRay")?;
         let surfaces = SurfaceColumns::new(&inputs[0]);
         let mut out = RayWriter::new(&mut outputs[0], surfaces.len() * lanes)?;
-        for index in 0..surfaces.len() {
+        out.extend_groups(surfaces.len(), lanes, |index| {
             let surface = surfaces.get(index);
-            for light in lights {
+            let origin = surface.offset_origin(epsilon);
+            move |lane| {
                 let dead = RayRecord::dead(surface.sample, surface.depth);
                 if !surface.hit {
-                    out.push(dead);
-                    continue;
+                    return dead;
                 }
-                let origin = surface.offset_origin(epsilon);
-                let to_light = light.position - origin;
+                let to_light = lights[lane].position - origin;
                 let distance = to_light.length();
                 let tmax = distance - epsilon;
                 if !(surface.normal.dot(to_light) > 0.0 && tmax > 0.0) {
-                    out.push(dead);
-                    continue;
+                    return dead;
                 }
-                out.push(RayRecord {
+                RayRecord {
                     origin,
                     dir: to_light / distance,
                     tmax,
                     sample: surface.sample,
                     weight: surface.weight,
                     depth: surface.depth,
-                });
+                }
             }
-        }
+        });
         Ok(())
     }
 }
