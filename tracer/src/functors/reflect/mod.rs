@@ -84,24 +84,30 @@ impl Functor for Reflect {
         let materials = ctx.resources::<TraceResources>()?.shading.materials();
         let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "reflect")?;
         let surfaces = SurfaceColumns::new(&inputs[0]);
+        // Every material a reflected hit names must exist: checked up front, so
+        // that the loop below cannot fail.
+        let reflects = |i: usize| {
+            surfaces.hit[i] && i64::from(surfaces.depth[i].saturating_add(1)) < max_depth
+        };
+        if let Some(index) = (0..surfaces.len())
+            .find(|&i| reflects(i) && surfaces.material[i] as usize >= materials.len())
+        {
+            return Err(FunctorError(format!(
+                "reflect: surface has material {}, but the scene has {} materials",
+                surfaces.material[index],
+                materials.len()
+            )));
+        }
         let mut out = RayWriter::new(&mut outputs[0], surfaces.len())?;
-        for index in 0..surfaces.len() {
+        out.extend_with(surfaces.len(), |index| {
             let surface = surfaces.get(index);
             let depth = surface.depth.saturating_add(1);
             if !surface.hit || i64::from(depth) >= max_depth {
-                out.push(RayRecord::dead(surface.sample, depth));
-                continue;
+                return RayRecord::dead(surface.sample, depth);
             }
-            let material = materials.get(surface.material as usize).ok_or_else(|| {
-                FunctorError(format!(
-                    "reflect: surface has material {}, but the scene has {} materials",
-                    surface.material,
-                    materials.len()
-                ))
-            })?;
-            if material.reflectivity <= 0.0 {
-                out.push(RayRecord::dead(surface.sample, depth));
-                continue;
+            let reflectivity = materials[surface.material as usize].reflectivity;
+            if reflectivity <= 0.0 {
+                return RayRecord::dead(surface.sample, depth);
             }
             let incoming = -surface.view;
             let mirror = |normal: Vec3| incoming - 2.0 * incoming.dot(normal) * normal;
@@ -109,15 +115,15 @@ impl Functor for Reflect {
             if dir.dot(surface.geometric) <= 0.0 {
                 dir = mirror(surface.geometric);
             }
-            out.push(RayRecord {
+            RayRecord {
                 origin: surface.offset_origin(epsilon),
                 dir: dir.normalize_or_zero(),
                 tmax: f32::INFINITY,
                 sample: surface.sample,
-                weight: surface.weight * material.reflectivity,
+                weight: surface.weight * reflectivity,
                 depth,
-            });
-        }
+            }
+        });
         Ok(())
     }
 }
@@ -232,5 +238,23 @@ mod tests {
         let out = fixture.run("reflect", &[], 0, &[surfaces.view()]).unwrap();
         let alive = fixture.run("alive", &[], 0, &[out[0].view()]).unwrap();
         assert_eq!(alive[0].view().as_bool(), &[true, false, false]);
+    }
+
+    /// A hit naming a material the scene lacks is an error where it would be
+    /// reflected, and nothing where it is not (a ray at the bounce limit).
+    #[test]
+    fn a_missing_material_is_an_error_only_where_it_reflects() {
+        let fixture = mirror_fixture();
+        let mut unknown = surface(Vec3::Z, 0);
+        unknown.material = 99;
+        let surfaces = fixture.surfaces(&[surface(Vec3::Z, 0), unknown]);
+        let error = fixture
+            .run("reflect", &[HostValue::Int(3)], 0, &[surfaces.view()])
+            .unwrap_err();
+        assert!(error.0.contains("material 99"), "{}", error.0);
+        let out = fixture
+            .run("reflect", &[HostValue::Int(1)], 0, &[surfaces.view()])
+            .unwrap();
+        assert!(read_rays(&out[0]).iter().all(|r| r.tmax == 0.0));
     }
 }
