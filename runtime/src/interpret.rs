@@ -35,15 +35,16 @@ pub struct StageTiming {
     /// backend measured it with timestamp queries.
     pub time: Duration,
     /// Where the stage's time went, op by op, where the backend can split it
-    /// (the CPU backend: one entry per op of the stage, in stage order);
-    /// empty where it cannot (a GPU stage is one kernel).
+    /// (the CPU backend: one entry per op of the stage, in stage order, then
+    /// one for storing its element-wise values if it stores any); empty where
+    /// it cannot (a GPU stage is one kernel).
     pub ops: Vec<OpTiming>,
 }
 
 /// Time the chunks of a stage spent in one of its ops, summed over the threads
 /// that ran them (so the ops of a stage on 2 threads add up to about twice its
-/// wall time, less what the stage does outside its chunks: joining
-/// materialised values, finishing sinks).
+/// wall time, less what the stage does outside its chunks: finishing its
+/// sinks).
 #[derive(Clone, Debug)]
 pub struct OpTiming {
     pub label: String,
@@ -152,6 +153,16 @@ impl<A> Slots<A> {
 
     pub fn set_array(&mut self, var: VarId, value: A) {
         self.arrays[var.0 as usize] = Some(value);
+    }
+
+    /// Binds `var` to `value`; the array it held, if any.
+    pub fn replace_array(&mut self, var: VarId, value: A) -> Option<A> {
+        self.arrays[var.0 as usize].replace(value)
+    }
+
+    /// Unbinds `var`; the array it held, if any.
+    pub fn take_array(&mut self, var: VarId) -> Option<A> {
+        self.arrays[var.0 as usize].take()
     }
 
     pub fn set_host(&mut self, var: VarId, value: HostValue) {
@@ -318,7 +329,7 @@ impl<A: Clone, B: Backend<Array = A>> HostEnvironment for Environment<'_, A, B> 
 impl<'a, B: Backend> Interpreter<'a, B> {
     /// Binds `dst` to `value`, handing the array it held to the backend.
     fn store(&mut self, dst: VarId, value: B::Array) {
-        if let Some(old) = self.slots.arrays[dst.0 as usize].replace(value) {
+        if let Some(old) = self.slots.replace_array(dst, value) {
             self.backend.release(old);
         }
     }

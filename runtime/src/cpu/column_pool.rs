@@ -22,9 +22,10 @@ const POOL_MIN_BYTES: usize = 1 << 20;
 /// The most memory the pool keeps; arrays beyond it are freed.
 const POOL_MAX_BYTES: usize = 4 << 30;
 
-/// A kept array serves a request of at least this fraction of its capacity,
-/// so that a small array does not hold a large one's memory.
-const LEAST_USED_FRACTION: usize = 2;
+/// A kept array serves a request only if its capacity is at most this many
+/// times the requested length, so that a small array does not hold a large
+/// one's memory.
+const MOST_CAPACITY_PER_ELEMENT: usize = 2;
 
 /// What a taken array must hold before the stage writes it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -39,7 +40,7 @@ pub enum Contents {
 #[derive(Debug)]
 pub struct ColumnPool {
     free: Mutex<PoolState>,
-    /// Arrays smaller than this are neither kept nor taken.
+    /// Arrays smaller than this are not kept.
     least_bytes: usize,
 }
 
@@ -135,9 +136,6 @@ impl ColumnPool {
     /// The smallest kept column of `ty` that holds `len` elements without
     /// wasting most of itself.
     fn kept(&self, ty: ElemType, len: usize) -> Option<Column> {
-        if element_bytes(ty) * len < self.least_bytes {
-            return None;
-        }
         let mut state = self.free.lock().unwrap_or_else(|e| e.into_inner());
         let (position, _) = state
             .columns
@@ -146,7 +144,7 @@ impl ColumnPool {
             .filter(|(_, column)| column.elem_type() == ty)
             .map(|(position, column)| (position, capacity(column)))
             .filter(|(_, capacity)| {
-                (len..=len.saturating_mul(LEAST_USED_FRACTION)).contains(capacity)
+                (len..=len.saturating_mul(MOST_CAPACITY_PER_ELEMENT)).contains(capacity)
             })
             .min_by_key(|(_, capacity)| *capacity)?;
         let column = state.columns.swap_remove(position);
@@ -161,18 +159,10 @@ fn capacity(column: &Column) -> usize {
 }
 
 fn capacity_bytes(column: &Column) -> usize {
-    capacity(column) * element_bytes(column.elem_type())
-}
-
-fn element_bytes(ty: ElemType) -> usize {
-    match ty {
-        ElemType::Bool => std::mem::size_of::<bool>(),
-        ElemType::U32 | ElemType::I32 | ElemType::F32 => 4,
-        ElemType::Vec2 => std::mem::size_of::<glam::Vec2>(),
-        ElemType::Vec3 => std::mem::size_of::<glam::Vec3>(),
-        ElemType::Vec4 => std::mem::size_of::<glam::Vec4>(),
-        ElemType::Record(_) => 0,
+    fn bytes<T>(values: &Vec<T>) -> usize {
+        values.capacity() * std::mem::size_of::<T>()
     }
+    crate::for_each_primitive!(Column, column, v => bytes(v), Column::Record { .. } => 0)
 }
 
 /// `len` elements, within the column's capacity: new ones are zero.

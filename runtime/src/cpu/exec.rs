@@ -229,7 +229,7 @@ impl StageRun<'_, '_> {
 
     /// Binds `var` to `column`, giving the array it held back to the pool.
     fn store(&mut self, var: VarId, column: Column) {
-        if let Some(old) = self.slots.arrays[var.0 as usize].replace(Arc::new(column)) {
+        if let Some(old) = self.slots.replace_array(var, Arc::new(column)) {
             self.context.column_pool.give(old);
         }
     }
@@ -238,15 +238,23 @@ impl StageRun<'_, '_> {
     /// hold from an earlier run of the same code (a loop's previous round),
     /// where no op of the stage reads them: the new values can use them.
     fn release_rebound_outputs(&mut self) {
-        let ops = &self.call.stage.ops;
-        for output in ops.iter().flat_map(|op| &op.outputs) {
-            if ops.iter().any(|op| op.array_reads().contains(output)) {
+        let stage = self.call.stage;
+        for &output in stage.ops.iter().flat_map(|op| &op.outputs) {
+            if self.read_in_stage(output, None) {
                 continue;
             }
-            if let Some(old) = self.slots.arrays[output.0 as usize].take() {
+            if let Some(old) = self.slots.take_array(output) {
                 self.context.column_pool.give(old);
             }
         }
+    }
+
+    /// Whether an op of the stage, other than `besides`, reads `var`'s array.
+    fn read_in_stage(&self, var: VarId, besides: Option<&Op>) -> bool {
+        self.call.stage.ops.iter().any(|op| {
+            !besides.is_some_and(|besides| std::ptr::eq(op, besides))
+                && op.array_reads().contains(&var)
+        })
     }
 
     /// The targets of the stage's plain scatters, made before its chunks run.
@@ -308,16 +316,10 @@ impl StageRun<'_, '_> {
                 &self.context.library.records,
             ),
             ScatterTarget::Into(dst) => {
-                let read_in_stage = self
-                    .call
-                    .stage
-                    .ops
-                    .iter()
-                    .any(|other| !std::ptr::eq(other, op) && other.array_reads().contains(dst));
                 let array = self.array(*dst)?.clone();
-                if *dst == op.outputs[0] && !read_in_stage {
+                if *dst == op.outputs[0] && !self.read_in_stage(*dst, Some(op)) {
                     // The slot is about to be overwritten: it lets go of the array.
-                    self.slots.arrays[dst.0 as usize] = None;
+                    self.slots.take_array(*dst);
                 }
                 Arc::unwrap_or_clone(array)
             }

@@ -154,6 +154,13 @@ fn embree_ray(rays: &RayColumns<'_>, index: usize) -> Ray {
     )
 }
 
+/// The packets of 16 rays that `n` rays make: each one's first ray and length.
+fn packets(n: usize) -> impl Iterator<Item = (usize, usize)> {
+    (0..n)
+        .step_by(16)
+        .map(move |start| (start, (n - start).min(16)))
+}
+
 /// Rays `start .. start + lanes` into the first lanes of `packet`; the mask
 /// of the live ones (`tmax > 0`).
 fn load_packet(
@@ -235,8 +242,7 @@ impl Functor for EmbreeIntersect {
                     ray: Ray16::empty(),
                     hit: Hit16::new(),
                 };
-                for start in (0..n).step_by(16) {
-                    let lanes = (n - start).min(16);
+                for (start, lanes) in packets(n) {
                     packet.hit.geomID = [INVALID_ID; 16];
                     packet.hit.primID = [INVALID_ID; 16];
                     let valid = load_packet(&mut packet.ray, &rays, start, lanes);
@@ -295,8 +301,7 @@ impl Functor for EmbreeOccluded {
             }
             EmbreeMode::Packet16 => {
                 let mut packet = Ray16::empty();
-                for start in (0..n).step_by(16) {
-                    let lanes = (n - start).min(16);
+                for (start, lanes) in packets(n) {
                     let valid = load_packet(&mut packet, &rays, start, lanes);
                     scene.occluded16(&mut context, &mut packet, &valid);
                     // Embree marks a blocked ray by setting its `tfar` to -inf.

@@ -102,7 +102,7 @@ impl Functor for Reflect {
         out.extend_with(surfaces.len(), |index| {
             let surface = surfaces.get(index);
             let depth = surface.depth.saturating_add(1);
-            if !surface.hit || i64::from(depth) >= max_depth {
+            if !reflects(index) {
                 return RayRecord::dead(surface.sample, depth);
             }
             let reflectivity = materials[surface.material as usize].reflectivity;
