@@ -8,6 +8,7 @@ pub mod functors;
 pub mod mesh;
 pub mod obj;
 pub mod ply;
+mod prefetch;
 mod random;
 pub mod scene;
 pub mod shading;

@@ -11,6 +11,7 @@ use glam::Vec3;
 /// overflows or underflows is first multiplied by the power of two that
 /// brings its largest component into `1 .. 2` (an exact scaling). Ordinary
 /// vectors get glam's bits.
+#[inline]
 pub fn unit_or_zero(v: Vec3) -> Vec3 {
     let unit = v.normalize_or_zero();
     if unit != Vec3::ZERO || v == Vec3::ZERO || !v.is_finite() {
