@@ -9,7 +9,7 @@ use crate::functors::wgsl::{
     bvh_module, request_resources, stack_overflow_failure, twin, vector_module, TwinParts,
 };
 use crate::functors::MISS_PRIM;
-use crate::functors::{hit_fields, record_fields_mut, RayColumns};
+use crate::functors::{commit, hit_fields, record_fields_mut, spare, RayColumns};
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
@@ -74,22 +74,35 @@ impl Functor for Intersect {
             u.as_f32_mut(),
             v.as_f32_mut(),
         );
-        t.reserve(rays.len());
-        prim.reserve(rays.len());
-        u.reserve(rays.len());
-        v.reserve(rays.len());
+        let len = rays.len();
+        let (t_spare, prim_spare, u_spare, v_spare) = (
+            spare(t, len),
+            spare(prim, len),
+            spare(u, len),
+            spare(v, len),
+        );
+        // The batch hands the hits over in ray order, one per ray.
+        let mut written = 0;
         // Dead rays (tmax <= 0) miss without a traversal.
         bvh.intersect_closest_batch(
-            rays.len(),
+            len,
             |index| rays.get(index),
             |hit| {
                 let (hit_t, hit_prim, hit_u, hit_v) = hit_fields(hit);
-                t.push(hit_t);
-                prim.push(hit_prim);
-                u.push(hit_u);
-                v.push(hit_v);
+                t_spare[written].write(hit_t);
+                prim_spare[written].write(hit_prim);
+                u_spare[written].write(hit_u);
+                v_spare[written].write(hit_v);
+                written += 1;
             },
         );
+        // SAFETY: the first `written` spare elements of every column were written.
+        unsafe {
+            commit(t, written);
+            commit(prim, written);
+            commit(u, written);
+            commit(v, written);
+        }
         Ok(())
     }
 }
