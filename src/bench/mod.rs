@@ -887,6 +887,7 @@ fn measure(
     for round in 0..args.warmup + args.rounds {
         let (result, elapsed) = frame(false)?;
         if round < args.warmup {
+            give_back_outputs(result, gpu, &frame_pool);
             continue;
         }
         measurement.frames_ms.push(ms(elapsed));
@@ -911,6 +912,8 @@ fn measure(
                 });
             }
         }
+        // A viewer draws the next frame into the last one's images.
+        give_back_outputs(result, gpu, &frame_pool);
     }
     if gpu.is_some() {
         for _ in 0..args.rounds {
@@ -920,6 +923,19 @@ fn measure(
         }
     }
     Ok((measurement, prims))
+}
+
+/// Gives a CPU frame's output arrays to the pool the next frames take arrays
+/// from (the GPU backend allocates its own).
+fn give_back_outputs(result: RunResult, gpu: Option<&GpuContext>, frame_pool: &ColumnPool) {
+    if gpu.is_some() {
+        return;
+    }
+    for (_, value) in result.outputs {
+        if let OutputValue::Array(column) = value {
+            frame_pool.give(column);
+        }
+    }
 }
 
 /// Adds one run's stage times to the means over `rounds` runs.

@@ -218,9 +218,14 @@ impl StageRun<'_, '_> {
             .filter(|(op, _)| is_sink(op));
         for (number, (op, sink_values)) in sinks.enumerate() {
             match direct.targets[number].take() {
-                Some((group, target)) => {
-                    self.finish_direct_scatter(op, target, group, &results, number)?
-                }
+                Some((group, target)) => self.finish_direct_scatter(
+                    op,
+                    target,
+                    &direct.groups[group],
+                    group,
+                    &results,
+                    number,
+                )?,
                 None => self.finish_sink(op, sink_values, &results, number)?,
             }
         }
@@ -283,7 +288,8 @@ impl StageRun<'_, '_> {
                 direct.targets.push(None);
                 continue;
             };
-            let target = self.scatter_target(op, values)?;
+            // A `len:` target's unclaimed slots are cleared after the stage.
+            let target = self.scatter_target(op, values, Contents::Overwritten)?;
             let key = (op.inputs[0], *mask, target.len());
             let group = match group_keys.iter().position(|k| *k == key) {
                 Some(group) => group,
@@ -300,11 +306,17 @@ impl StageRun<'_, '_> {
         Ok(direct)
     }
 
-    /// What a scatter writes into: zeros, or a copy of its `into:` array. A
+    /// What a scatter writes into: zeros (or, asked for `Overwritten`, an
+    /// array whose every slot the caller writes), or a copy of its `into:` array. A
     /// scatter that rebinds its own target (`c = scatter(…, into: c)`) takes
     /// the array out of the slot it replaces, where no other op of the stage
     /// reads it, so the copy is only made if something else still holds it.
-    fn scatter_target(&mut self, op: &Op, values: &OpHostValues) -> Result<Column, RunError> {
+    fn scatter_target(
+        &mut self,
+        op: &Op,
+        values: &OpHostValues,
+        len_target: Contents,
+    ) -> Result<Column, RunError> {
         let OpKind::Scatter { target, .. } = &op.kind else {
             unreachable!("a scatter")
         };
@@ -312,7 +324,7 @@ impl StageRun<'_, '_> {
             ScatterTarget::Len(_) => self.context.column_pool.take(
                 self.elem_type(op.outputs[0]),
                 values.scatter_len.unwrap_or_default(),
-                Contents::Zeroed,
+                len_target,
                 &self.context.library.records,
             ),
             ScatterTarget::Into(dst) => {
@@ -332,11 +344,19 @@ impl StageRun<'_, '_> {
         &mut self,
         op: &Op,
         target: SharedTarget,
+        claims: &ScatterClaims,
         group: usize,
         results: &[ChunkResult],
         number: usize,
     ) -> Result<(), RunError> {
         let mut dst = target.into_column();
+        if let OpKind::Scatter {
+            target: ScatterTarget::Len(_),
+            ..
+        } = &op.kind
+        {
+            claims.zero_unclaimed(&mut dst);
+        }
         fn kept_aside(result: &ChunkResult, number: usize) -> Option<&(ChunkValue, ChunkValue)> {
             match &result.sinks[number] {
                 SinkPart::Written(kept) => kept.as_ref(),
@@ -389,7 +409,7 @@ impl StageRun<'_, '_> {
                 combine: Some(combine),
                 ..
             } => {
-                let mut dst = self.scatter_target(op, values)?;
+                let mut dst = self.scatter_target(op, values, Contents::Zeroed)?;
                 for result in results {
                     let SinkPart::Scatter {
                         indices,

@@ -22,6 +22,7 @@ use super::kernels::{
 };
 use crate::column::{Column, ColumnView};
 use crate::types::ElemType;
+use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
@@ -161,6 +162,45 @@ impl ScatterClaims {
             claimed.own = Some(own);
         }
         Ok(claimed)
+    }
+}
+
+impl ScatterClaims {
+    /// Sets every slot of `column` that no chunk claimed to zero (the default
+    /// of its type), in parallel: a scatter's `len:` target starts as zeros,
+    /// and the slots its chunks claimed were all written, so only the others
+    /// need clearing. A scatter of a tracer's pixels claims every slot and
+    /// clears nothing.
+    pub fn zero_unclaimed(&self, column: &mut Column) {
+        fn zero<T: Copy + Default + Send>(values: &mut [T], claimed: &[AtomicU64]) {
+            // Whole bitmap words per part, so that parts own their slots.
+            const WORDS_PER_PART: usize = 1 << 10;
+            values
+                .par_chunks_mut(64 * WORDS_PER_PART)
+                .zip(claimed.par_chunks(WORDS_PER_PART))
+                .for_each(|(part, words)| {
+                    for (slots, word) in part.chunks_mut(64).zip(words) {
+                        let mut unclaimed = !word.load(Ordering::Relaxed);
+                        if unclaimed == u64::MAX {
+                            slots.fill(T::default());
+                            continue;
+                        }
+                        while unclaimed != 0 {
+                            let bit = unclaimed.trailing_zeros() as usize;
+                            if let Some(slot) = slots.get_mut(bit) {
+                                *slot = T::default();
+                            }
+                            unclaimed &= unclaimed - 1;
+                        }
+                    }
+                });
+        }
+        debug_assert_eq!(column.len(), self.target_len);
+        crate::for_each_primitive!(Column, column, v => zero(v, &self.claimed), Column::Record { fields, .. } => {
+            for field in fields {
+                self.zero_unclaimed(Arc::make_mut(field));
+            }
+        })
     }
 }
 
@@ -345,7 +385,6 @@ fn copy_leaves<'l>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rayon::prelude::*;
 
     /// Chunks of `indices` claimed and written in parallel, then the writes
     /// kept aside applied: the sequential kernel's result, bit for bit.
@@ -423,6 +462,36 @@ mod tests {
         let indices = numbers(5, 1500, 40);
         let mask: Vec<bool> = numbers(6, 1500, 3).iter().map(|&n| n != 0).collect();
         check(&indices, Some(&mask), 40, 16);
+    }
+
+    #[test]
+    fn only_the_slots_no_chunk_claimed_are_cleared() {
+        // More slots than one part of the clearing (64 Ki), and not a whole
+        // number of words; claimed in dense and in sparse chunks.
+        let target_len = (1 << 17) + 37;
+        let claims = ScatterClaims::new(target_len);
+        let dense: Vec<u32> = (1000..5000).chain(70_000..70_100).collect();
+        let sparse = numbers(7, 300, target_len as u32);
+        for indices in [&dense, &sparse] {
+            claims.claim(indices, None).unwrap();
+        }
+        let last = target_len as u32 - 1;
+        claims.claim(&[last], None).unwrap();
+        let mut column = Column::U32(vec![9; target_len]);
+        claims.zero_unclaimed(&mut column);
+        let claimed: std::collections::HashSet<u32> =
+            dense.iter().chain(&sparse).copied().chain([last]).collect();
+        let Column::U32(values) = column else {
+            unreachable!()
+        };
+        for (slot, &value) in values.iter().enumerate() {
+            let expected = if claimed.contains(&(slot as u32)) {
+                9
+            } else {
+                0
+            };
+            assert_eq!(value, expected, "slot {slot}");
+        }
     }
 
     #[test]
