@@ -6,7 +6,8 @@
 //! units in the last place of `x^y`, as close as `f32::powf` gets (tested).
 //!
 //! (Tried for the shader's specular `max(n·h, 0)^Ns` too: in its light loop
-//! the f64 series cost what the `powf` calls did, so that stays `powf`.)
+//! the f64 series cost what the `powf` calls did, and so did a SIMD loop of
+//! its own over a block's lanes, so that stays `powf`.)
 
 /// `log2 x` for finite `x > 0`; other inputs give some number.
 #[inline(always)]
@@ -57,7 +58,11 @@ pub(crate) fn exp2(y: f64) -> f64 {
     ] {
         exp = exp * z + 1.0 / factorial;
     }
-    let scale = f64::from_bits(((n as i64 + 1023).clamp(1, 2046) as u64) << 52);
+    // 2^n from its exponent field, the biased exponent taken from the low bits
+    // of `biased + 2^52` (exact: an integer below 2^11): unlike a float-to-int
+    // conversion, this compiles to SIMD.
+    let biased = (n + 1023.0).clamp(1.0, 2046.0);
+    let scale = f64::from_bits((biased + 4_503_599_627_370_496.0).to_bits() << 52);
     if y < -1022.0 {
         0.0
     } else {
