@@ -9,7 +9,7 @@ use crate::functors::wgsl::{
     bvh_module, request_resources, stack_overflow_failure, twin, vector_module, TwinParts,
 };
 use crate::functors::MISS_PRIM;
-use crate::functors::{commit, hit_fields, record_fields_mut, spare, RayColumns};
+use crate::functors::{write_hits, RayColumns};
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
@@ -67,43 +67,11 @@ impl Functor for Intersect {
     ) -> Result<(), FunctorError> {
         let bvh = &ctx.resources::<TraceResources>()?.scene.bvh;
         let rays = RayColumns::new(&inputs[0]);
-        let [t, prim, u, v] = record_fields_mut::<4>(&mut outputs[0])?;
-        let (t, prim, u, v) = (
-            t.as_f32_mut(),
-            prim.as_u32_mut(),
-            u.as_f32_mut(),
-            v.as_f32_mut(),
-        );
         let len = rays.len();
-        let (t_spare, prim_spare, u_spare, v_spare) = (
-            spare(t, len),
-            spare(prim, len),
-            spare(u, len),
-            spare(v, len),
-        );
-        // The batch hands the hits over in ray order, one per ray.
-        let mut written = 0;
         // Dead rays (tmax <= 0) miss without a traversal.
-        bvh.intersect_closest_batch(
-            len,
-            |index| rays.get(index),
-            |hit| {
-                let (hit_t, hit_prim, hit_u, hit_v) = hit_fields(hit);
-                t_spare[written].write(hit_t);
-                prim_spare[written].write(hit_prim);
-                u_spare[written].write(hit_u);
-                v_spare[written].write(hit_v);
-                written += 1;
-            },
-        );
-        // SAFETY: the first `written` spare elements of every column were written.
-        unsafe {
-            commit(t, written);
-            commit(prim, written);
-            commit(u, written);
-            commit(v, written);
-        }
-        Ok(())
+        write_hits(&mut outputs[0], len, |sink| {
+            bvh.intersect_closest_batch(len, |index| rays.get(index), |hit| sink.push(hit))
+        })
     }
 }
 

@@ -19,7 +19,7 @@
 //! Embree 16 rays at a time through `rtcIntersect16` (`rtcOccluded16`), its
 //! packet mode; dead rays are masked out.
 
-use crate::functors::{hit_fields, record_fields_mut, RayColumns};
+use crate::functors::{write_hits, RayColumns};
 use crate::mesh::{MeshError, TriangleMesh};
 use dpp_runtime::{
     CallContext, Column, ColumnView, Functor, FunctorError, FunctorLibrary, Signature,
@@ -199,27 +199,9 @@ impl Functor for EmbreeIntersect {
     ) -> Result<(), FunctorError> {
         let rays = RayColumns::new(&inputs[0]);
         let n = rays.len();
-        let [t, prim, u, v] = record_fields_mut::<4>(&mut outputs[0])?;
-        let (t, prim, u, v) = (
-            t.as_f32_mut(),
-            prim.as_u32_mut(),
-            u.as_f32_mut(),
-            v.as_f32_mut(),
-        );
-        t.reserve(n);
-        prim.reserve(n);
-        u.reserve(n);
-        v.reserve(n);
         let scene = &self.scene.scene;
         let mut context = IntersectContext::coherent();
-        let mut push = |hit: Option<crate::bvh::HitRecord>| {
-            let (hit_t, hit_prim, hit_u, hit_v) = hit_fields(hit);
-            t.push(hit_t);
-            prim.push(hit_prim);
-            u.push(hit_u);
-            v.push(hit_v);
-        };
-        match self.mode {
+        write_hits(&mut outputs[0], n, |sink| match self.mode {
             EmbreeMode::Single => {
                 for index in 0..n {
                     let hit = if rays.tmax[index] > 0.0 {
@@ -234,7 +216,7 @@ impl Functor for EmbreeIntersect {
                     } else {
                         None
                     };
-                    push(hit);
+                    sink.push(hit);
                 }
             }
             EmbreeMode::Packet16 => {
@@ -256,12 +238,11 @@ impl Functor for EmbreeIntersect {
                                 v: packet.hit.v(lane),
                             }
                         });
-                        push(hit);
+                        sink.push(hit);
                     }
                 }
             }
-        }
-        Ok(())
+        })
     }
 }
 
