@@ -115,12 +115,15 @@ impl Functor for SurfaceFunctor {
         let normals = mesh.normals.as_deref();
         let scalars = mesh.scalars.as_deref();
         let triangle_materials = scene.materials.triangle_materials.as_slice();
+        // The triangle a live ray hit (none for a miss, a dead ray, or past the end).
+        let live_prim = |index: usize| {
+            let prim = *prims.get(index)?;
+            (prim != MISS_PRIM && tmaxs[index] > 0.0).then_some(prim as usize)
+        };
         // Every triangle a live ray hits must exist: checked up front, so that the
         // loop below cannot fail.
-        let names_no_triangle = |index: usize| {
-            let prim = prims[index];
-            tmaxs[index] > 0.0 && prim != MISS_PRIM && prim as usize >= triangles.len()
-        };
+        let names_no_triangle =
+            |index: usize| live_prim(index).is_some_and(|prim| prim >= triangles.len());
         if let Some(index) = (0..len).find(|&index| names_no_triangle(index)) {
             return Err(FunctorError(format!(
                 "surface: hit names triangle {}, but the scene has {} triangles",
@@ -131,10 +134,6 @@ impl Functor for SurfaceFunctor {
         // The corners of the triangle hit `TRIANGLE_AHEAD` rays on are fetched
         // while this ray is shaded, and its corner indices `2 * TRIANGLE_AHEAD`
         // on, so that the loop does not wait on each ray's chain of misses.
-        let live_prim = |index: usize| {
-            let prim = *prims.get(index)?;
-            (prim != MISS_PRIM && tmaxs[index] > 0.0).then_some(prim as usize)
-        };
         let prefetch_ahead = |index: usize| {
             if let Some(prim) = live_prim(index + 2 * TRIANGLE_AHEAD) {
                 prefetch(triangles, prim);
