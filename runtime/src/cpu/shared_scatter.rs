@@ -72,20 +72,31 @@ impl ScatterClaims {
         }
         let used = |position: usize| mask.is_none_or(|mask| mask[position]);
         let target_len = self.target_len;
-        let (mut lowest, mut highest) = (u32::MAX, 0);
-        for (position, &index) in indices.iter().enumerate() {
-            if !used(position) {
-                continue;
+        // The range first, in a loop without exits (which vectorises), and
+        // the position of a bad index only if there is one.
+        let (lowest, highest) = match mask {
+            None => indices.iter().fold((u32::MAX, 0), |(low, high), &index| {
+                (low.min(index), high.max(index))
+            }),
+            Some(mask) => {
+                indices
+                    .iter()
+                    .zip(mask)
+                    .fold((u32::MAX, 0), |(low, high), (&index, &used)| {
+                        let (for_low, for_high) = if used { (index, index) } else { (u32::MAX, 0) };
+                        (low.min(for_low), high.max(for_high))
+                    })
             }
-            if index as usize >= target_len {
-                return Err(KernelError::IndexOutOfRange {
-                    position,
-                    index,
-                    len: target_len,
-                });
-            }
-            lowest = lowest.min(index);
-            highest = highest.max(index);
+        };
+        if lowest <= highest && highest as usize >= target_len {
+            let position = (0..indices.len())
+                .find(|&position| used(position) && indices[position] as usize >= target_len)
+                .expect("the highest index is out of range");
+            return Err(KernelError::IndexOutOfRange {
+                position,
+                index: indices[position],
+                len: target_len,
+            });
         }
         let mut claimed = Claimed {
             own: None,
@@ -121,31 +132,33 @@ impl ScatterClaims {
             claimed.own = Some(own);
             return Ok(claimed);
         }
-        // The chunk's bits, a word per 64 slots from `first_word` on.
+        // The chunk's bits, a word per 64 slots from `first_word` on, and the
+        // words it has bits in (a tile of pixels spans many words of rows it
+        // does not touch).
         let mut wanted = vec![0u64; words];
+        let mut touched = Vec::new();
         for (position, &index) in indices.iter().enumerate() {
             if used(position) {
-                wanted[word(index) - first_word] |= bit(index);
+                let offset = word(index) - first_word;
+                if wanted[offset] == 0 {
+                    touched.push(offset);
+                }
+                wanted[offset] |= bit(index);
             }
         }
         let mut all_won = true;
-        let won: Vec<u64> = wanted
+        // From here on `won` holds the bits the chunk won.
+        let mut won = wanted;
+        for &offset in &touched {
+            let bits = won[offset];
+            let before = self.claimed[first_word + offset].fetch_or(bits, Ordering::Relaxed);
+            all_won &= before & bits == 0;
+            won[offset] = bits & !before;
+        }
+        claimed.won = touched
             .iter()
-            .enumerate()
-            .map(|(offset, &bits)| {
-                if bits == 0 {
-                    return 0;
-                }
-                let before = self.claimed[first_word + offset].fetch_or(bits, Ordering::Relaxed);
-                all_won &= before & bits == 0;
-                bits & !before
-            })
-            .collect();
-        claimed.won = won
-            .iter()
-            .enumerate()
-            .filter(|(_, &bits)| bits != 0)
-            .map(|(offset, &bits)| (first_word + offset, bits))
+            .filter(|&&offset| won[offset] != 0)
+            .map(|&offset| (first_word + offset, won[offset]))
             .collect();
         if !all_won {
             let mut own = Vec::with_capacity(indices.len());
