@@ -37,6 +37,9 @@ pub(super) trait Lanes: Copy {
     /// the watertight test's re-evaluation of an edge function that came out
     /// exactly zero in f32.
     fn edge_in_f64(self, px: Self::F, py: Self::F, qx: Self::F, qy: Self::F) -> Self::F;
+    /// The least and the greatest lane (for lanes without NaN).
+    fn least(self, x: Self::F) -> f32;
+    fn greatest(self, x: Self::F) -> f32;
 }
 
 /// Helpers built on [`Lanes`]. No closures: a closure is a function of its own,
@@ -144,6 +147,14 @@ impl Lanes for Portable {
         std::array::from_fn(|i| {
             (f64::from(px[i]) * f64::from(qy[i]) - f64::from(py[i]) * f64::from(qx[i])) as f32
         })
+    }
+    #[inline(always)]
+    fn least(self, x: [f32; 8]) -> f32 {
+        x.into_iter().fold(f32::INFINITY, f32::min)
+    }
+    #[inline(always)]
+    fn greatest(self, x: [f32; 8]) -> f32 {
+        x.into_iter().fold(f32::NEG_INFINITY, f32::max)
     }
 }
 
@@ -272,7 +283,34 @@ mod x86 {
                     _mm256_set_m128(high, low)
                 }
             }
+            #[inline(always)]
+            fn least(self, x: __m256) -> f32 {
+                unsafe { least_of_8(x) }
+            }
+            #[inline(always)]
+            fn greatest(self, x: __m256) -> f32 {
+                unsafe { greatest_of_8(x) }
+            }
         };
+    }
+
+    // SAFETY: callers hold a token for AVX (AVX2 or AVX-512).
+    #[inline(always)]
+    unsafe fn least_of_8(x: __m256) -> f32 {
+        unsafe {
+            let m = _mm_min_ps(_mm256_castps256_ps128(x), _mm256_extractf128_ps::<1>(x));
+            let m = _mm_min_ps(m, _mm_movehl_ps(m, m));
+            _mm_cvtss_f32(_mm_min_ss(m, _mm_shuffle_ps::<1>(m, m)))
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn greatest_of_8(x: __m256) -> f32 {
+        unsafe {
+            let m = _mm_max_ps(_mm256_castps256_ps128(x), _mm256_extractf128_ps::<1>(x));
+            let m = _mm_max_ps(m, _mm_movehl_ps(m, m));
+            _mm_cvtss_f32(_mm_max_ss(m, _mm_shuffle_ps::<1>(m, m)))
+        }
     }
 
     macro_rules! lanes8_256 {
@@ -443,6 +481,14 @@ mod x86 {
                 let low = _mm512_castps_pd(_mm512_castps256_ps512(low));
                 _mm512_castpd_ps(_mm512_insertf64x4::<1>(low, _mm256_castps_pd(high)))
             }
+        }
+        #[inline(always)]
+        fn least(self, x: __m512) -> f32 {
+            unsafe { _mm512_reduce_min_ps(x) }
+        }
+        #[inline(always)]
+        fn greatest(self, x: __m512) -> f32 {
+            unsafe { _mm512_reduce_max_ps(x) }
         }
     }
 }

@@ -829,6 +829,96 @@ fn packets_resolve_exact_ties_like_every_traversal() {
     }
 }
 
+/// Packets whose directions have components exactly zero (an infinite inverse:
+/// the packet's frustum bounds nothing on that axis) or that run along the
+/// flat grid's plane, closest and any hit, from one origin and from many.
+#[test]
+fn packets_with_directions_along_an_axis_match_binary() {
+    let mesh = grid(64);
+    let bvh = Bvh::build(&mesh).unwrap();
+    let eye = Vec3::new(20.3, 40.7, 9.0);
+    let mut rays = Vec::new();
+    for i in 0..16 {
+        let step = i as f32 * 0.37;
+        let lean = if i % 2 == 0 { 0.0 } else { 1e-3 * step };
+        for target in [
+            // x exactly zero in every lane; in every other lane; y zero.
+            Vec3::new(eye.x, 3.0 + step, 0.0),
+            Vec3::new(eye.x + lean, 3.0 + step, 0.0),
+            Vec3::new(30.0 + step, eye.y, 0.0),
+        ] {
+            rays.push(Ray {
+                origin: eye,
+                direction: target - eye,
+                tmax: f32::INFINITY,
+            });
+        }
+    }
+    // Packets of 16 of a kind: regroup the interleaved targets.
+    let mut grouped: Vec<Ray> = (0..3)
+        .flat_map(|k| rays.iter().skip(k).step_by(3).copied())
+        .collect();
+    // From a grid line: half the lanes along its plane (x exactly -0), half
+    // leaning off it, where boxes begin exactly at the origin's x.
+    let on_line = Vec3::new(10.0, 20.5, 9.0);
+    for i in 0..16 {
+        let x = if i % 2 == 0 { -0.0 } else { -1e-3 * i as f32 };
+        grouped.push(Ray {
+            origin: on_line,
+            direction: Vec3::new(x, -17.0 + i as f32 * 0.37, -9.0),
+            tmax: f32::INFINITY,
+        });
+    }
+    // Straight down, and along the plane at its height (grazing every triangle).
+    for i in 0..16 {
+        grouped.push(Ray {
+            origin: eye,
+            direction: Vec3::new(0.0, 0.0, -1.0 - i as f32),
+            tmax: f32::INFINITY,
+        });
+    }
+    for i in 0..16 {
+        grouped.push(Ray {
+            origin: Vec3::new(-1.0, 5.0, 0.0),
+            direction: Vec3::new(1.0, 0.01 * i as f32, 0.0),
+            tmax: f32::INFINITY,
+        });
+    }
+    check_batch_against_binary(&bvh, &grouped);
+    // Any hit, from many origins: shadow rays straight down and sideways.
+    let shadow: Vec<Ray> = (0..64)
+        .flat_map(|i| {
+            let origin = Vec3::new(
+                0.5 + i as f32 * 0.9,
+                7.0 + (i % 5) as f32,
+                1.0 + (i % 3) as f32,
+            );
+            [
+                Ray {
+                    origin,
+                    direction: Vec3::new(0.0, 0.0, -1.0),
+                    tmax: 10.0,
+                },
+                Ray {
+                    origin,
+                    direction: Vec3::new(0.0, 1.0, -0.5),
+                    tmax: if i % 4 == 0 { 1.0 } else { 10.0 },
+                },
+            ]
+        })
+        .collect();
+    let expected: Vec<bool> = shadow
+        .iter()
+        .map(|ray| bvh.occluded_binary(ray, ray.tmax))
+        .collect();
+    assert!(expected.iter().any(|&b| b) && !expected.iter().all(|&b| b));
+    for isa in Isa::available() {
+        let mut got = Vec::with_capacity(shadow.len());
+        bvh.occluded_batch_with(isa, shadow.len(), |i| shadow[i], |b| got.push(b));
+        assert_eq!(got, expected, "{isa:?}");
+    }
+}
+
 /// Any-hit batches sort their rays into packets of one octant: shadow rays
 /// from a camera's hit points to two lights (interleaved, as `shadowRay`
 /// makes them) and short ambient-occlusion rays around each point (four

@@ -6,7 +6,10 @@
 //! traffic and control flow. Where few rays of the packet remain in a subtree,
 //! they finish it one by one with the single-ray walk, which tests eight boxes
 //! or sixteen triangles at once instead. An any-hit lane leaves the packet at
-//! its first hit.
+//! its first hit. Below its first two inner nodes a packet first tests the
+//! eight children's boxes against its frustum (the range of its rays' origins
+//! and inverse directions) and tests only the children that pass it ray by
+//! ray: most children of a deep node are missed by every ray of the packet.
 //!
 //! Each lane does the scalar tests' IEEE operations on its own ray, so distances,
 //! culling and hits per ray are exactly those of the single-ray traversal; ties
@@ -14,9 +17,16 @@
 
 use super::super::simd::{Lanes, Lanes8, LanesExt};
 use super::{
-    planes, walk, watertight, Bvh, Found, PreparedRay, Ray, Stack, Walk, LEAF, NO_HIT,
+    planes, walk, watertight, Bvh, Found, PreparedRay, Ray, Stack, Walk, WideNode, LEAF, NO_HIT,
     ROBUST_FAR_SCALE, STACK_ENTRIES, WIDTH,
 };
+
+/// Inner nodes a packet visits before it culls children by its [`Frustum`]:
+/// near the root most children are entered, and a packet that leaves early
+/// (rays that miss the scene) would pay for the frustum and gain nothing
+/// (measured: from the third node on is 0-11% faster than from the first,
+/// which is slower on the bunny's front view).
+const FRUSTUM_AFTER: u32 = 2;
 
 /// The widest packet (AVX-512: 16 rays).
 pub(super) const MAX_PACKET: usize = 16;
@@ -154,6 +164,9 @@ fn traverse_packet<
     ];
     // The packet's rays share their direction signs.
     let [near_plane, far_plane] = planes(rays[0].direction.to_array().map(f32::is_sign_negative));
+    let mut frustum = None;
+    let mut inner_nodes_visited = 0;
+    let closest_bound = rays.iter().fold(0.0f32, |bound, ray| bound.max(ray.tmax));
 
     let mut closest = lanes.load_row(&rows[6]);
     let zero = lanes.splat(0.0);
@@ -211,7 +224,26 @@ fn traverse_packet<
             let mut entered = [(0u32, 0u32, 0.0f32); WIDTH];
             let mut t_entry = [[0.0f32; MAX_PACKET]; WIDTH];
             let mut count = 0;
+            inner_nodes_visited += 1;
             let mut children = node.valid;
+            if inner_nodes_visited > FRUSTUM_AFTER {
+                // No closure: see `LanesExt`.
+                if frustum.is_none() {
+                    frustum = Some(Frustum::new(
+                        boxes,
+                        lanes,
+                        rays,
+                        // Closest-hit packets share their origin (`is_packet`).
+                        !ANY_HIT,
+                        &origin,
+                        &inverse_direction,
+                    ));
+                }
+                let Some(frustum) = &frustum else {
+                    unreachable!("made above")
+                };
+                children = frustum.children_entered(boxes, node, closest_bound);
+            }
             while children != 0 {
                 let child = children.trailing_zeros() as usize;
                 children &= children - 1;
@@ -358,5 +390,127 @@ fn traverse_packet<
             );
             Some((index, closest[lane], u[lane], v[lane]))
         };
+    }
+}
+
+/// What the packet's rays have in common, to see, for eight children at once,
+/// which of them no ray of the packet can enter: per axis the range of the
+/// rays' origins and of their inverse directions (of one sign). A ray's slab
+/// distance `(plane - origin) * inverse` is, rounding included, monotonic in
+/// both, so the range's corners bound every ray's distance, and a child whose
+/// bounds fail the entry test fails it for every ray: culling it changes no
+/// result. An axis on which some ray's inverse direction or origin is not
+/// finite (a direction parallel to the slab) bounds nothing and is skipped.
+struct Frustum<S: Lanes> {
+    usable: [bool; 3],
+    /// The origin bound that gives the least near-plane distance, and the one
+    /// that gives the greatest far-plane distance.
+    near_origin: [S::F; 3],
+    far_origin: [S::F; 3],
+    inverse_low: [S::F; 3],
+    inverse_high: [S::F; 3],
+    near_plane: [usize; 3],
+    far_plane: [usize; 3],
+}
+
+impl<S: Lanes8> Frustum<S> {
+    #[inline(always)]
+    fn new<T: Lanes>(
+        lanes: S,
+        packet_lanes: T,
+        rays: &[Ray],
+        one_origin: bool,
+        origin: &[T::F; 3],
+        inverse_direction: &[T::F; 3],
+    ) -> Frustum<S> {
+        let negative = rays[0].direction.to_array().map(f32::is_sign_negative);
+        let [near_plane, far_plane] = planes(negative);
+        let zero = lanes.splat(0.0);
+        let mut frustum = Frustum {
+            usable: [false; 3],
+            near_origin: [zero; 3],
+            far_origin: [zero; 3],
+            inverse_low: [zero; 3],
+            inverse_high: [zero; 3],
+            near_plane,
+            far_plane,
+        };
+        let lanes_in_use = (1u32 << rays.len()) - 1;
+        let whole = rays.len() == T::N;
+        for axis in 0..3 {
+            let (mut origin, mut inverse) = (origin[axis], inverse_direction[axis]);
+            // `x - x` is 0 only for finite `x`.
+            let zero = packet_lanes.splat(0.0);
+            let finite = packet_lanes.eq(packet_lanes.sub(origin, origin), zero)
+                & packet_lanes.eq(packet_lanes.sub(inverse, inverse), zero);
+            frustum.usable[axis] = finite & lanes_in_use == lanes_in_use;
+            if !frustum.usable[axis] {
+                continue;
+            }
+            if !whole {
+                // Lanes past the packet's rays repeat its first ray.
+                let first = rays[0];
+                origin = packet_lanes.select(
+                    lanes_in_use,
+                    origin,
+                    packet_lanes.splat(first.origin[axis]),
+                );
+                inverse = packet_lanes.select(
+                    lanes_in_use,
+                    inverse,
+                    packet_lanes.splat(1.0 / first.direction[axis]),
+                );
+            }
+            let (origin_low, origin_high) = if one_origin {
+                (rays[0].origin[axis], rays[0].origin[axis])
+            } else {
+                (packet_lanes.least(origin), packet_lanes.greatest(origin))
+            };
+            // A positive inverse makes the distance grow with `plane - origin`,
+            // so the least near distance comes from the highest origin.
+            let (near, far) = if negative[axis] {
+                (origin_low, origin_high)
+            } else {
+                (origin_high, origin_low)
+            };
+            frustum.near_origin[axis] = lanes.splat(near);
+            frustum.far_origin[axis] = lanes.splat(far);
+            frustum.inverse_low[axis] = lanes.splat(packet_lanes.least(inverse));
+            frustum.inverse_high[axis] = lanes.splat(packet_lanes.greatest(inverse));
+        }
+        frustum
+    }
+
+    /// The children of `node` some ray of the packet may enter before
+    /// `closest_bound` (no ray's closest hit is farther).
+    #[inline(always)]
+    fn children_entered(&self, lanes: S, node: &WideNode, closest_bound: f32) -> u32 {
+        let mut t_enter = lanes.splat(0.0);
+        let mut t_exit = lanes.splat(closest_bound);
+        for axis in 0..3 {
+            if !self.usable[axis] {
+                continue;
+            }
+            let near = lanes.sub(
+                lanes.load(&node.planes[self.near_plane[axis]]),
+                self.near_origin[axis],
+            );
+            let far = lanes.sub(
+                lanes.load(&node.planes[self.far_plane[axis]]),
+                self.far_origin[axis],
+            );
+            // Finite times finite: no NaN.
+            let least_near = lanes.min_or_second(
+                lanes.mul(near, self.inverse_low[axis]),
+                lanes.mul(near, self.inverse_high[axis]),
+            );
+            let greatest_far = lanes.max_or_second(
+                lanes.mul(far, self.inverse_low[axis]),
+                lanes.mul(far, self.inverse_high[axis]),
+            );
+            t_enter = lanes.max_or_second(least_near, t_enter);
+            t_exit = lanes.min_or_second(greatest_far, t_exit);
+        }
+        lanes.le(t_enter, lanes.mul(t_exit, lanes.splat(ROBUST_FAR_SCALE))) & node.valid
     }
 }
