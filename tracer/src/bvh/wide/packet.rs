@@ -166,7 +166,6 @@ fn traverse_packet<
     let [near_plane, far_plane] = planes(rays[0].direction.to_array().map(f32::is_sign_negative));
     let mut frustum = None;
     let mut inner_nodes_visited = 0;
-    let closest_bound = rays.iter().fold(0.0f32, |bound, ray| bound.max(ray.tmax));
 
     let mut closest = lanes.load_row(&rows[6]);
     let zero = lanes.splat(0.0);
@@ -239,10 +238,9 @@ fn traverse_packet<
                         &inverse_direction,
                     ));
                 }
-                let Some(frustum) = &frustum else {
-                    unreachable!("made above")
-                };
-                children = frustum.children_entered(boxes, node, closest_bound);
+                if let Some(frustum) = &frustum {
+                    children = frustum.children_entered(boxes, node);
+                }
             }
             while children != 0 {
                 let child = children.trailing_zeros() as usize;
@@ -411,6 +409,8 @@ struct Frustum<S: Lanes> {
     inverse_high: [S::F; 3],
     near_plane: [usize; 3],
     far_plane: [usize; 3],
+    /// The packet's largest `tmax`: no ray's closest hit is farther.
+    farthest: f32,
 }
 
 impl<S: Lanes8> Frustum<S> {
@@ -434,6 +434,7 @@ impl<S: Lanes8> Frustum<S> {
             inverse_high: [zero; 3],
             near_plane,
             far_plane,
+            farthest: rays.iter().fold(0.0f32, |bound, ray| bound.max(ray.tmax)),
         };
         let lanes_in_use = (1u32 << rays.len()) - 1;
         let whole = rays.len() == T::N;
@@ -481,12 +482,12 @@ impl<S: Lanes8> Frustum<S> {
         frustum
     }
 
-    /// The children of `node` some ray of the packet may enter before
-    /// `closest_bound` (no ray's closest hit is farther).
+    /// The children of `node` some ray of the packet may enter before its
+    /// `tmax`.
     #[inline(always)]
-    fn children_entered(&self, lanes: S, node: &WideNode, closest_bound: f32) -> u32 {
+    fn children_entered(&self, lanes: S, node: &WideNode) -> u32 {
         let mut t_enter = lanes.splat(0.0);
-        let mut t_exit = lanes.splat(closest_bound);
+        let mut t_exit = lanes.splat(self.farthest);
         for axis in 0..3 {
             if !self.usable[axis] {
                 continue;
