@@ -6,6 +6,7 @@ use crate::functors::wgsl::{
     mesh_module, request_resources, twin, vec3_literal, vector_module, TwinParts,
 };
 use crate::functors::{HitColumns, RayColumns, MISS_PRIM};
+use crate::prefetch::{prefetch, prefetch_hit_ahead};
 use crate::scene::TraceResources;
 use crate::vector::unit_or_zero;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
@@ -80,7 +81,17 @@ impl Functor for NormalColor {
         let hits = HitColumns::new(&inputs[1]);
         let colors = outputs[0].as_vec3_mut();
         colors.reserve(rays.len());
-        for (&direction, &prim) in rays.dir.iter().zip(hits.prim) {
+        let (triangles, positions) = (mesh.triangles.as_slice(), mesh.positions.as_slice());
+        let live_prim = |index: usize| {
+            let prim = *hits.prim.get(index)?;
+            (prim != MISS_PRIM).then_some(prim as usize)
+        };
+        for (index, (&direction, &prim)) in rays.dir.iter().zip(hits.prim).enumerate() {
+            prefetch_hit_ahead(index, live_prim, triangles, |_, corners| {
+                for vertex in corners {
+                    prefetch(positions, vertex);
+                }
+            });
             if prim == MISS_PRIM {
                 colors.push(BACKGROUND);
                 continue;

@@ -24,7 +24,7 @@ use crate::functors::wgsl::{
     f32_literal, mesh_module, request_resources, twin, vector_module, TwinParts,
 };
 use crate::functors::{HitColumns, RayColumns, SurfaceRecord, SurfaceWriter, MISS_PRIM};
-use crate::prefetch::prefetch;
+use crate::prefetch::{prefetch, prefetch_hit_ahead};
 use crate::scene::TraceResources;
 use crate::vector::unit_or_zero;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
@@ -37,9 +37,6 @@ use glam::Vec3;
 /// The least `normal·view` of a shading normal: the interpolated normal is bent
 /// towards the viewer up to this, so no shading point faces away from the ray.
 pub const MIN_VIEW_COSINE: f32 = 0.01;
-
-/// How many rays ahead the loop fetches a hit triangle's corners.
-const TRIANGLE_AHEAD: usize = 8;
 
 pub struct SurfaceFunctor {
     signature: Signature,
@@ -131,22 +128,15 @@ impl Functor for SurfaceFunctor {
                 triangles.len()
             )));
         }
-        // The corners of the triangle hit `TRIANGLE_AHEAD` rays on are fetched
-        // while this ray is shaded, and its corner indices `2 * TRIANGLE_AHEAD`
-        // on, so that the loop does not wait on each ray's chain of misses.
         let prefetch_ahead = |index: usize| {
-            if let Some(prim) = live_prim(index + 2 * TRIANGLE_AHEAD) {
-                prefetch(triangles, prim);
-            }
-            if let Some(prim) = live_prim(index + TRIANGLE_AHEAD) {
+            prefetch_hit_ahead(index, live_prim, triangles, |prim, corners| {
                 prefetch(triangle_materials, prim);
-                for vertex in triangles[prim] {
-                    let vertex = vertex as usize;
+                for vertex in corners {
                     prefetch(positions, vertex);
                     normals.inspect(|normals| prefetch(normals, vertex));
                     scalars.inspect(|scalars| prefetch(scalars, vertex));
                 }
-            }
+            })
         };
         let mut out = SurfaceWriter::new(&mut outputs[0], len)?;
         out.extend_with(len, |index| {
