@@ -56,6 +56,16 @@ pub const ONE_SIDED_RAYS_PER_MILLION: u64 = 1;
 #[cfg_attr(not(feature = "embree"), allow(dead_code))]
 const BORDER_BAND: f64 = 1e-4;
 
+/// ... or within this many f32 rounding steps of the corners' distance from
+/// the eye, in world units, of an edge. Both tests round in coordinates taken
+/// relative to the ray's origin, so their error scales with that distance,
+/// not with the triangle: a sliver a thousandth as wide as it is long (as
+/// marching cubes makes) is crossed by a band of a ten-thousandth of its width
+/// that is narrower than one rounding step, and rays 2–3 steps from its long
+/// edge (measured on a soup of such slivers) went either way. 16 steps at a
+/// distance of 2 is a thousandth of a 640-pixel frame's pixel.
+const BORDER_ROUNDING_STEPS: f64 = 16.0;
+
 /// At most this many rays on which the engines disagree are kept for the JSON report.
 const MISMATCH_SAMPLES: usize = 8;
 
@@ -404,8 +414,9 @@ impl EngineResult {
 }
 
 /// Whether the ray of row-major `pixel` (WORKLOAD1's: one sample at the pixel
-/// centre) meets the plane of triangle `prim` within [`BORDER_BAND`] of the
-/// triangle's border, computed in f64; also true for a ray in the plane.
+/// centre) meets the plane of triangle `prim` within [`BORDER_BAND`] or
+/// [`BORDER_ROUNDING_STEPS`] of the triangle's border, computed in f64; also
+/// true for a ray in the plane.
 #[cfg_attr(not(feature = "embree"), allow(dead_code))]
 fn ray_at_border(camera: &Camera, mesh: &TriangleMesh, pixel: usize, prim: u32) -> bool {
     let Some(triangle) = mesh.triangles.get(prim as usize) else {
@@ -426,7 +437,22 @@ fn ray_at_border(camera: &Camera, mesh: &TriangleMesh, pixel: usize, prim: u32) 
     let to_origin = origin - p0;
     let u = to_origin.dot(p) / det;
     let v = dir.dot(to_origin.cross(e1)) / det;
-    u.min(v).min(1.0 - u - v).abs() <= BORDER_BAND
+    if u.min(v).min(1.0 - u - v).abs() <= BORDER_BAND {
+        return true;
+    }
+    let point = p0 + u * e1 + v * e2;
+    let distance_to_edge = |a: glam::DVec3, b: glam::DVec3| {
+        let along = ((point - a).dot(b - a) / (b - a).length_squared()).clamp(0.0, 1.0);
+        (a + along * (b - a)).distance(point)
+    };
+    let nearest_edge = distance_to_edge(p0, p1)
+        .min(distance_to_edge(p1, p2))
+        .min(distance_to_edge(p2, p0));
+    let farthest_corner = [p0, p1, p2]
+        .map(|corner| corner.distance(origin))
+        .into_iter()
+        .fold(0.0, f64::max);
+    nearest_edge <= BORDER_ROUNDING_STEPS * f32::EPSILON as f64 * farthest_corner
 }
 
 /// WORKLOAD1's `prim` and `depth` outputs (row-major pixels).
@@ -1162,6 +1188,26 @@ mod tests {
         assert!(ray_at_border(
             &camera(Vec3::new(0.0, 0.0, 1.0)),
             &mesh,
+            centre,
+            0
+        ));
+        // A sliver a thousandth as wide as long: a ray about 4 rounding steps
+        // (at the eye's distance, about 1) outside its long edge is at the
+        // border, though that is half a thousandth of the sliver's width, more
+        // than BORDER_BAND; one a tenth of its width outside is not.
+        let sliver = TriangleMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(0.5, 1e-3, 0.0)],
+            ..mesh.clone()
+        };
+        assert!(ray_at_border(
+            &camera(Vec3::new(0.5, -4.0 * f32::EPSILON, 1.0)),
+            &sliver,
+            centre,
+            0
+        ));
+        assert!(!ray_at_border(
+            &camera(Vec3::new(0.5, -1e-4, 1.0)),
+            &sliver,
             centre,
             0
         ));
