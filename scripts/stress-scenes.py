@@ -128,6 +128,23 @@ def soup():
     return positions, triangles
 
 
+def needles(count=50_000):
+    """50,000 random needles, each about a thousandth as wide as it is long:
+    a band of a ten-thousandth of a needle's width is narrower than one f32
+    rounding step, which is what made `dpp bench` count rays 2-3 steps off a
+    long edge as a disagreement before the border band had a rounding term."""
+    rng = random.Random(2)
+    positions, triangles = [], []
+    for _ in range(count):
+        start = [rng.uniform(-1, 1) for _ in range(3)]
+        along = [rng.uniform(-1, 1) for _ in range(3)]
+        end = [s + a for s, a in zip(start, along)]
+        base = len(positions)
+        positions += [tuple(start), tuple(end), tuple(e + 1e-4 * a + 1e-3 for e, a in zip(end, along))]
+        triangles.append((base, base + 1, base + 2))
+    return positions, triangles
+
+
 def one_triangle():
     """A lone right triangle: its hypotenuse is an open border through the view's centre."""
     return [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0)], [(0, 1, 2)]
@@ -212,6 +229,7 @@ SCENES = {
     "sphere-1e15": lambda: sphere((0.0, 0.0, 0.0), 1e15),
     "sphere-1e-14": lambda: sphere((0.0, 0.0, 0.0), 1e-14),
     "soup": soup,
+    "needles": needles,
     "one-triangle": one_triangle,
     "cube-every-face-twice": cube_every_face_twice,
     "layers": layers,
