@@ -37,9 +37,12 @@ pub use report::{GpuInfo, Report};
 
 /// Hits agree when, for at least this share of the rays, both engines name the
 /// same triangle or (a tie between overlapping triangles) a different one at
-/// the same distance, and when the rays that one engine hits and the other
+/// the same distance, or one engine hits the ray at a triangle's border and the
+/// other misses it; and when the rays that one engine hits and the other
 /// misses are all at a triangle's border (give or take
-/// [`ONE_SIDED_RAYS_PER_MILLION`]).
+/// [`ONE_SIDED_RAYS_PER_MILLION`]). A ray excused at a border is not held
+/// against the share too: a lone triangle in a 64×64 frame has 16 such rays of
+/// 4096 on its open edge, 0.4%.
 pub const AGREEMENT: f64 = 0.999;
 
 /// Rays in a million that may hit in one engine and miss in the other away from
@@ -409,8 +412,9 @@ pub struct EngineResult {
 impl EngineResult {
     pub fn agrees(&self) -> bool {
         let allowed = self.rays * ONE_SIDED_RAYS_PER_MILLION / 1_000_000;
+        let at_border = self.one_sided_at_border as f64 / self.rays.max(1) as f64;
         self.one_sided - self.one_sided_at_border <= allowed
-            && self.same_triangle + self.ties >= AGREEMENT
+            && self.same_triangle + self.ties + at_border >= AGREEMENT
     }
 }
 
@@ -1149,10 +1153,43 @@ mod tests {
         assert_eq!(result.mismatches, vec![(0, miss, f32::INFINITY, 7, 7.0)]);
         // ... at the border of the triangle it hit: they agree.
         let at_border = |pixel: usize, prim: u32| (pixel, prim) == (0, 7);
-        let result = compare(engine, m.clone(), m, &dpp, &other, at_border);
+        let result = compare(engine, m.clone(), m.clone(), &dpp, &other, at_border);
         assert!(result.agrees());
         assert_eq!((result.one_sided, result.one_sided_at_border), (1, 1));
         assert!(result.mismatches.is_empty());
+        // Many rays that one engine hits at a border (1.5% of them, the share
+        // of the same triangle below 99.9%) still agree, as a lone triangle's
+        // open edge through a small frame's pixel centres makes them ...
+        let mut along_an_edge = Hits {
+            prim: dpp.prim.clone(),
+            depth: dpp.depth.clone(),
+        };
+        for pixel in (0..30).map(|i| 3 * i) {
+            along_an_edge.prim[pixel] = 7;
+            along_an_edge.depth[pixel] = 7.0;
+        }
+        let at_border = |pixel: usize, prim: u32| prim == 7 && pixel % 3 == 0;
+        let result = compare(
+            engine,
+            m.clone(),
+            m.clone(),
+            &dpp,
+            &along_an_edge,
+            at_border,
+        );
+        assert!(result.same_triangle < AGREEMENT);
+        assert!(result.agrees());
+        // ... but as many rays that hit two different triangles do not.
+        let mut different = Hits {
+            prim: dpp.prim.clone(),
+            depth: dpp.depth.clone(),
+        };
+        for pixel in (0..30).map(|i| 3 * i + 1) {
+            different.prim[pixel] = 7;
+            different.depth[pixel] = 7.0;
+        }
+        let result = compare(engine, m.clone(), m, &dpp, &different, nowhere);
+        assert!(!result.agrees());
     }
 
     #[test]
