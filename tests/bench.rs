@@ -51,6 +51,11 @@ fn tiny_bench(more: &[&str], dir: &std::path::Path) -> std::process::Output {
     dpp(&args, dir)
 }
 
+/// The JSON report a bench wrote to `bench.json` in `dir`.
+fn bench_json(dir: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("bench.json")).unwrap()).unwrap()
+}
+
 #[test]
 fn a_tiny_bench_writes_tables_json_and_a_chart() {
     let dir = tempfile::tempdir().unwrap();
@@ -109,9 +114,7 @@ fn a_tiny_bench_writes_tables_json_and_a_chart() {
         assert!(markdown.contains(op), "{op} missing:\n{markdown}");
     }
 
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
-            .unwrap();
+    let json = bench_json(dir.path());
     assert_eq!(json["backend"], "cpu");
     assert!(json.get("adapter").is_none());
     assert_eq!(json["threads"], 2);
@@ -207,6 +210,8 @@ fn bad_bench_input_is_exit_status_2() {
         (&["rm:1,2"], "rm:X,Y,Z"),
         (&["--size", "0x10"], "is empty"),
         (&["--backend", "tpu"], "invalid value 'tpu'"),
+        (&["--embree-test", "fast"], "add embree to --engine"),
+        (&["--embree-test", "exact"], "invalid value 'exact'"),
     ];
     for (args, expected) in cases {
         let mut all: Vec<&str> = base.to_vec();
@@ -306,6 +311,14 @@ fn an_embree_bench_compares_workload1_and_workload3() {
         "--json",
         "bench.json",
     ];
+    // Embree's fast test is named in both reports.
+    let output = tiny_bench(
+        &[&more[..], &["--embree-test", "fast"]].concat(),
+        dir.path(),
+    );
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    assert!(text(&output.stdout).contains("`--embree-test fast`"));
+    assert_eq!(bench_json(dir.path())["embree_test"], "fast");
     let output = tiny_bench(&more, dir.path());
     let markdown = text(&output.stdout);
     assert!(output.status.success(), "{}", text(&output.stderr));
@@ -315,9 +328,12 @@ fn an_embree_bench_compares_workload1_and_workload3() {
     ] {
         assert!(markdown.contains(heading), "{heading} missing:\n{markdown}");
     }
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
-            .unwrap();
+    assert!(
+        markdown.contains("robust, watertight triangle test"),
+        "{markdown}"
+    );
+    let json = bench_json(dir.path());
+    assert_eq!(json["embree_test"], "robust");
     let view = &json["scenes"][0]["views"][0];
     let engines = view["engines"].as_array().unwrap();
     assert_eq!(engines.len(), 2);
@@ -419,9 +435,7 @@ fn a_tiny_gpu_bench_names_the_adapter_and_times_stages() {
         text(&output.stderr)
     );
 
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
-            .unwrap();
+    let json = bench_json(dir.path());
     assert_eq!(json["backend"], "gpu");
     let adapter = json["adapter"]["name"].as_str().unwrap();
     assert!(!adapter.is_empty());

@@ -110,6 +110,9 @@ pub struct BenchArgs {
     /// build with `--features embree`; CPU backend only).
     #[arg(long, default_value = "dpp")]
     engine: String,
+    /// Embree's triangle test, with `--engine dpp,embree` (default: robust).
+    #[arg(long, value_enum)]
+    embree_test: Option<EmbreeTest>,
     /// The isosurface level for volume files.
     #[arg(long, allow_hyphen_values = true)]
     iso: Option<f32>,
@@ -126,6 +129,26 @@ pub struct BenchArgs {
     /// Draw WORKLOAD1's rates (or the frame rates) as a PNG bar chart.
     #[arg(long, value_name = "FILE.png")]
     chart: Option<PathBuf>,
+}
+
+/// The triangle test of Embree's scene (`--embree-test`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum EmbreeTest {
+    /// `RTC_SCENE_FLAG_ROBUST`: watertight, like dpp's, so that the hits can be
+    /// compared ray by ray.
+    Robust,
+    /// Embree's default flags: its faster test, which lets a few rays through
+    /// the edges two triangles share.
+    Fast,
+}
+
+impl EmbreeTest {
+    pub fn name(self) -> &'static str {
+        match self {
+            EmbreeTest::Robust => "robust",
+            EmbreeTest::Fast => "fast",
+        }
+    }
 }
 
 /// A scene as the command line names it.
@@ -220,6 +243,7 @@ struct Setup {
     views: Vec<(String, StandardView)>,
     workloads: Vec<u32>,
     embree: bool,
+    embree_test: EmbreeTest,
     pipelines: PathBuf,
 }
 
@@ -281,6 +305,9 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
                 .into(),
         );
     }
+    if args.embree_test.is_some() && !embree {
+        return Err("error: --embree-test chooses Embree's triangle test: add embree to --engine (--engine dpp,embree)".into());
+    }
     if args.rounds == 0 {
         return Err("error: --rounds must be at least 1".into());
     }
@@ -312,6 +339,7 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
         views,
         workloads,
         embree,
+        embree_test: args.embree_test.unwrap_or(EmbreeTest::Robust),
         pipelines,
     })
 }
@@ -557,8 +585,10 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         #[cfg(feature = "embree")]
         let embree = if setup.embree {
             progress.set_message(format!("{}: building Embree's BVH", spec.name()));
-            let built = dpp_tracer::functors::intersect_embree::EmbreeScene::build(&scene.mesh)
-                .map_err(|e| Failure::Run(e.to_string()))?;
+            let robust = setup.embree_test == EmbreeTest::Robust;
+            let built =
+                dpp_tracer::functors::intersect_embree::EmbreeScene::build(&scene.mesh, robust)
+                    .map_err(|e| Failure::Run(e.to_string()))?;
             Some(Arc::new(built))
         } else {
             None
@@ -681,6 +711,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         size: args.size,
         warmup: args.warmup,
         rounds: args.rounds,
+        embree_test: setup.embree.then_some(setup.embree_test),
         scenes,
     };
     let markdown = report.markdown();

@@ -68,6 +68,8 @@ pub struct Report {
     pub size: (u32, u32),
     pub warmup: u32,
     pub rounds: u32,
+    /// Embree's triangle test, when Embree ran.
+    pub embree_test: Option<super::EmbreeTest>,
     pub scenes: Vec<SceneResult>,
 }
 
@@ -80,6 +82,14 @@ fn mean(values: &[f64]) -> f64 {
 }
 
 impl Report {
+    /// Which triangle test Embree's scene had, for the Embree sections.
+    fn embree_test_words(&self) -> &'static str {
+        match self.embree_test {
+            Some(super::EmbreeTest::Fast) => "Embree's scene has its default triangle test, faster than its robust one and not watertight (`--embree-test fast`)",
+            _ => "Embree's scene has its robust, watertight triangle test (`--embree-test robust`, the default)",
+        }
+    }
+
     fn has_workload(&self, workload: u32) -> bool {
         self.scenes
             .iter()
@@ -105,7 +115,7 @@ impl Report {
     /// WORKLOAD3's fused frame with dpp's traversal and with Embree's.
     fn write_workload3_engines(&self, md: &mut String) {
         let _ = writeln!(md, "## WORKLOAD3: dpp against Embree, fused frame ms\n");
-        let _ = writeln!(md, "The fused WORKLOAD3 plan with Embree behind `intersect` and `occluded` (`rtcIntersect1` and `rtcOccluded1` per ray, or the 16-ray packet calls); everything else is the same. Ratio: Embree's time over dpp's. The last two columns are the thread time (ms, summed over the threads) inside the `map<intersect>` ops (camera and reflected rays, closest hit) and the `map<occluded>` ops (occlusion and shadow rays, any hit), dpp / Embree single / Embree packet.\n");
+        let _ = writeln!(md, "The fused WORKLOAD3 plan with Embree behind `intersect` and `occluded` (`rtcIntersect1` and `rtcOccluded1` per ray, or the 16-ray packet calls); everything else is the same. {}. Ratio: Embree's time over dpp's. The last two columns are the thread time (ms, summed over the threads) inside the `map<intersect>` ops (camera and reflected rays, closest hit) and the `map<occluded>` ops (occlusion and shadow rays, any hit), dpp / Embree single / Embree packet.\n", self.embree_test_words());
         let _ = writeln!(md, "| scene | view | dpp | Embree single | Embree packet | single / dpp | packet / dpp | `intersect` thread ms | `occluded` thread ms |");
         let _ = writeln!(
             md,
@@ -258,7 +268,7 @@ impl Report {
                 md,
                 "## WORKLOAD1: dpp against Embree, `map<intersect>` Mrays/s\n"
             );
-            let _ = writeln!(md, "The same pipeline with Embree behind `intersect` (`rtcIntersect1` per ray, or `rtcIntersect16` packets). Ratio: dpp's rate over Embree's. Hits: rays that hit, dpp / Embree; same triangle: rays for which both name the same triangle or both miss, and (+) rays that hit different triangles at the same distance (overlapping triangles, a tie). Where one engine hits a ray the other misses, the hits cell says how many such rays there were, and how many of them meet the hit triangle's plane at its border (within a ten-thousandth of its size, or of {} f32 rounding steps at its corners' distance from the eye, in f64: where the two watertight tests may round either way). They agree (✗ where not) when all such rays but {} per million are at a border and the two shares add up, with the one-sided rays at a border, to {:.1}% or more.\n", super::BORDER_ROUNDING_STEPS, super::ONE_SIDED_RAYS_PER_MILLION, 100.0 * AGREEMENT);
+            let _ = writeln!(md, "The same pipeline with Embree behind `intersect` (`rtcIntersect1` per ray, or `rtcIntersect16` packets). {}. Ratio: dpp's rate over Embree's. Hits: rays that hit, dpp / Embree; same triangle: rays for which both name the same triangle or both miss, and (+) rays that hit different triangles at the same distance (overlapping triangles, a tie). Where one engine hits a ray the other misses, the hits cell says how many such rays there were, and how many of them meet the hit triangle's plane at its border (within a ten-thousandth of its size, or of {} f32 rounding steps at its corners' distance from the eye, in f64: where the two watertight tests may round either way). They agree (✗ where not) when all such rays but {} per million are at a border and the two shares add up, with the one-sided rays at a border, to {:.1}% or more.\n", self.embree_test_words(), super::BORDER_ROUNDING_STEPS, super::ONE_SIDED_RAYS_PER_MILLION, 100.0 * AGREEMENT);
             let _ = writeln!(md, "| scene | view | dpp | Embree single | Embree packet | dpp / single | dpp / packet | hits (single) | hits (packet) | same triangle (single / packet) |");
             let _ = writeln!(
                 md,
@@ -542,6 +552,7 @@ impl Report {
             "size": [self.size.0, self.size.1],
             "warmup_rounds": self.warmup,
             "measured_rounds": self.rounds,
+            "embree_test": self.embree_test.map(super::EmbreeTest::name),
             "dpp_version": env!("CARGO_PKG_VERSION"),
             "scenes": scenes,
         });

@@ -75,8 +75,11 @@ impl std::fmt::Debug for EmbreeScene {
 }
 
 impl EmbreeScene {
-    /// Copies the mesh into Embree's buffers and builds its BVH (default quality).
-    pub fn build(mesh: &TriangleMesh) -> Result<EmbreeScene, EmbreeError> {
+    /// Copies the mesh into Embree's buffers and builds its BVH (default
+    /// quality). `robust`: Embree's watertight triangle test
+    /// (`RTC_SCENE_FLAG_ROBUST`), like ours; otherwise its default, faster
+    /// test, which lets a few rays through the edges two triangles share.
+    pub fn build(mesh: &TriangleMesh, robust: bool) -> Result<EmbreeScene, EmbreeError> {
         mesh.validate()?;
         let failed = |what: &str, error: embree3::Error| {
             EmbreeError::Embree(format!("{what} failed ({error:?})"))
@@ -112,10 +115,9 @@ impl EmbreeScene {
         let mut scene = device
             .create_scene()
             .map_err(|e| failed("creating a scene", e))?;
-        // Robust mode: a watertight triangle test like ours, so that no ray slips
-        // between two triangles that share an edge (the default test lets a few
-        // through, and then the engines' hit counts differ).
-        scene.set_flags(SceneFlags::ROBUST);
+        if robust {
+            scene.set_flags(SceneFlags::ROBUST);
+        }
         scene.attach_geometry(&geometry);
         scene.commit();
         Ok(EmbreeScene {
@@ -372,10 +374,20 @@ mod tests {
         ]
     }
 
+    /// Embree's scene of the fixture, with its robust test and with its fast
+    /// one: the probe rays meet no shared edge, so both must hit alike.
+    fn both_embree_scenes(fixture: &Fixture) -> [(bool, Arc<EmbreeScene>); 2] {
+        [true, false].map(|robust| {
+            (
+                robust,
+                Arc::new(EmbreeScene::build(&fixture.resources.scene.mesh, robust).unwrap()),
+            )
+        })
+    }
+
     #[test]
     fn embree_hits_mean_what_the_cpu_hits_mean() {
         let fixture = Fixture::new();
-        let scene = Arc::new(EmbreeScene::build(&fixture.resources.scene.mesh).unwrap());
         // Enough rays for a full packet, a partial one, and dead rays among them.
         let mut rays = read_rays(&probe_rays(&fixture));
         rays = rays.iter().cycle().take(37).copied().collect();
@@ -385,13 +397,21 @@ mod tests {
         let rays = fixture.rays(&rays);
         let expected = hits(&fixture, &fixture.library, &rays);
         assert!(expected[1].contains(&(MISS_PRIM as f32)));
-        for mode in [EmbreeMode::Single, EmbreeMode::Packet16] {
-            let library = library_with_embree(&fixture.library, scene.clone(), mode).unwrap();
-            let got = hits(&fixture, &library, &rays);
-            assert_eq!(got[1], expected[1], "{mode:?}: triangle ids");
-            for field in [0, 2, 3] {
-                for (a, b) in got[field].iter().zip(&expected[field]) {
-                    assert!(a == b || (a - b).abs() < 1e-5, "{mode:?}: {a} vs {b}");
+        for (robust, scene) in both_embree_scenes(&fixture) {
+            for mode in [EmbreeMode::Single, EmbreeMode::Packet16] {
+                let library = library_with_embree(&fixture.library, scene.clone(), mode).unwrap();
+                let got = hits(&fixture, &library, &rays);
+                assert_eq!(
+                    got[1], expected[1],
+                    "{mode:?}, robust {robust}: triangle ids"
+                );
+                for field in [0, 2, 3] {
+                    for (a, b) in got[field].iter().zip(&expected[field]) {
+                        assert!(
+                            a == b || (a - b).abs() < 1e-5,
+                            "{mode:?}, robust {robust}: {a} vs {b}"
+                        );
+                    }
                 }
             }
         }
@@ -400,7 +420,6 @@ mod tests {
     #[test]
     fn embree_occlusion_means_what_the_cpu_occlusion_means() {
         let fixture = Fixture::new();
-        let scene = Arc::new(EmbreeScene::build(&fixture.resources.scene.mesh).unwrap());
         let mut rays = read_rays(&probe_rays(&fixture));
         rays = rays.iter().cycle().take(37).copied().collect();
         rays[4].tmax = 0.0;
@@ -413,16 +432,18 @@ mod tests {
         let expected = blocked(&fixture.library);
         assert!(expected.contains(&true) && expected.contains(&false));
         assert!(!expected[4] && !expected[20], "dead rays are never blocked");
-        for mode in [EmbreeMode::Single, EmbreeMode::Packet16] {
-            let library = library_with_embree(&fixture.library, scene.clone(), mode).unwrap();
-            assert_eq!(blocked(&library), expected, "{mode:?}");
+        for (robust, scene) in both_embree_scenes(&fixture) {
+            for mode in [EmbreeMode::Single, EmbreeMode::Packet16] {
+                let library = library_with_embree(&fixture.library, scene.clone(), mode).unwrap();
+                assert_eq!(blocked(&library), expected, "{mode:?}, robust {robust}");
+            }
         }
     }
 
     #[test]
     fn the_swapped_library_keeps_every_other_functor() {
         let fixture = Fixture::new();
-        let scene = Arc::new(EmbreeScene::build(&fixture.resources.scene.mesh).unwrap());
+        let scene = Arc::new(EmbreeScene::build(&fixture.resources.scene.mesh, true).unwrap());
         let library = library_with_embree(&fixture.library, scene, EmbreeMode::Single).unwrap();
         let names = |l: &FunctorLibrary| l.names().collect::<Vec<_>>();
         assert_eq!(names(&library), names(&fixture.library));
