@@ -142,15 +142,6 @@ pub enum EmbreeTest {
     Fast,
 }
 
-impl EmbreeTest {
-    pub fn name(self) -> &'static str {
-        match self {
-            EmbreeTest::Robust => "robust",
-            EmbreeTest::Fast => "fast",
-        }
-    }
-}
-
 /// A scene as the command line names it.
 #[derive(Clone, Debug, PartialEq)]
 enum SceneSpec {

@@ -86,7 +86,7 @@ impl Report {
     fn embree_test_words(&self) -> &'static str {
         match self.embree_test {
             Some(super::EmbreeTest::Fast) => "Embree's scene has its default triangle test, faster than its robust one and not watertight (`--embree-test fast`)",
-            _ => "Embree's scene has its robust, watertight triangle test (`--embree-test robust`, the default)",
+            Some(super::EmbreeTest::Robust) | None => "Embree's scene has its robust, watertight triangle test (`--embree-test robust`, the default)",
         }
     }
 
@@ -552,7 +552,11 @@ impl Report {
             "size": [self.size.0, self.size.1],
             "warmup_rounds": self.warmup,
             "measured_rounds": self.rounds,
-            "embree_test": self.embree_test.map(super::EmbreeTest::name),
+            // The name `--embree-test` takes.
+            "embree_test": self
+                .embree_test
+                .and_then(|test| clap::ValueEnum::to_possible_value(&test))
+                .map(|value| value.get_name().to_string()),
             "dpp_version": env!("CARGO_PKG_VERSION"),
             "scenes": scenes,
         });
