@@ -299,13 +299,13 @@ element face 1\nproperty list uchar int vertex_indices\nend_header\n"
 /// the hits agree, and every stage that traces still has its thread time.
 #[cfg(feature = "embree")]
 #[test]
-fn an_embree_bench_compares_workload1_and_workload3() {
+fn an_embree_bench_compares_every_workload() {
     let dir = tempfile::tempdir().unwrap();
     let more = [
         "--views",
         "front",
         "--workloads",
-        "1,3",
+        "1,2,3",
         "--engine",
         "dpp,embree",
         "--json",
@@ -324,6 +324,7 @@ fn an_embree_bench_compares_workload1_and_workload3() {
     assert!(output.status.success(), "{}", text(&output.stderr));
     for heading in [
         "## WORKLOAD1: dpp against Embree",
+        "## WORKLOAD2: dpp against Embree, fused frame ms",
         "## WORKLOAD3: dpp against Embree, fused frame ms",
     ] {
         assert!(markdown.contains(heading), "{heading} missing:\n{markdown}");
@@ -338,17 +339,30 @@ fn an_embree_bench_compares_workload1_and_workload3() {
     let engines = view["engines"].as_array().unwrap();
     assert_eq!(engines.len(), 2);
     assert!(engines.iter().all(|e| e["agree"] == true), "{engines:?}");
-    let traced = view["workload3_engines"].as_array().unwrap();
-    let names: Vec<&str> = traced
+    let traced = view["engine_frames"].as_array().unwrap();
+    let runs: Vec<(u64, &str)> = traced
         .iter()
-        .map(|e| e["engine"].as_str().unwrap())
+        .map(|e| {
+            let workload = e["workload"].as_u64().unwrap();
+            (workload, e["engine"].as_str().unwrap())
+        })
         .collect();
-    assert_eq!(names, ["embree-single", "embree-packet"]);
+    assert_eq!(
+        runs,
+        [
+            (2, "embree-single"),
+            (3, "embree-single"),
+            (2, "embree-packet"),
+            (3, "embree-packet")
+        ]
+    );
     for engine in traced {
         assert!(engine["engine_over_dpp"].as_f64().unwrap() > 0.0);
-        for functor in ["intersect_thread_ms", "occluded_thread_ms"] {
-            assert!(engine[functor].as_f64().unwrap() > 0.0, "{engine}");
-        }
+        assert!(engine["intersect_thread_ms"].as_f64().unwrap() > 0.0);
+        assert!(engine["fused_over_workload1_intersect"].as_f64().unwrap() > 0.0);
+        // Only WORKLOAD3 traces any-hit rays.
+        let occluded = engine["occluded_thread_ms"].as_f64().unwrap();
+        assert_eq!(occluded > 0.0, engine["workload"] == 3, "{engine}");
     }
 }
 

@@ -485,9 +485,11 @@ pub struct Hits {
     depth: Vec<f32>,
 }
 
-/// WORKLOAD3's fused plan with one engine behind `intersect` and `occluded`.
+/// WORKLOAD2's or WORKLOAD3's fused plan with one engine behind `intersect`
+/// (and `occluded`).
 #[derive(Clone, Debug)]
 pub struct TracedByEngine {
+    pub workload: u32,
     pub engine: Engine,
     pub fused: Measurement,
 }
@@ -499,8 +501,8 @@ pub struct ViewResult {
     pub workloads: Vec<WorkloadResult>,
     /// WORKLOAD1's intersection with each engine.
     pub engines: Vec<EngineResult>,
-    /// WORKLOAD3 with each engine.
-    pub workload3_engines: Vec<TracedByEngine>,
+    /// WORKLOAD2 and WORKLOAD3 with each engine.
+    pub engine_frames: Vec<TracedByEngine>,
 }
 
 impl ViewResult {
@@ -511,6 +513,22 @@ impl ViewResult {
             .iter()
             .find(|w| w.workload == 1)
             .and_then(|w| w.unfused.intersect_ms())
+    }
+
+    /// The same with `engine` behind `intersect`, if it ran.
+    pub fn engine_workload1_intersect_ms(&self, engine: Engine) -> Option<f64> {
+        self.engines
+            .iter()
+            .find(|e| e.engine == engine)
+            .and_then(|e| e.unfused.intersect_ms())
+    }
+
+    /// The fused frame of `workload` with `engine` behind its traversal, if it ran.
+    pub fn engine_frame(&self, workload: u32, engine: Engine) -> Option<&Measurement> {
+        self.engine_frames
+            .iter()
+            .find(|r| r.workload == workload && r.engine == engine)
+            .map(|r| &r.fused)
     }
 }
 
@@ -556,7 +574,8 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     // On the GPU the stage times come from as many profiled runs as measured ones.
     let profiled = if gpu.is_some() { args.rounds } else { 0 };
     let rounds = u64::from(args.warmup + args.rounds + profiled);
-    // With Embree: WORKLOAD1 fused and unfused, WORKLOAD3 fused, for each of its two modes.
+    // With Embree: WORKLOAD1 fused and unfused, WORKLOAD2 and WORKLOAD3 fused,
+    // for each of its two modes.
     let embree_plans = |workload: u32, plans: u64| {
         if setup.embree && setup.workloads.contains(&workload) {
             2 * plans
@@ -564,7 +583,10 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             0
         }
     };
-    let per_view = 2 * setup.workloads.len() as u64 + embree_plans(1, 2) + embree_plans(3, 1);
+    let per_view = 2 * setup.workloads.len() as u64
+        + embree_plans(1, 2)
+        + embree_plans(2, 1)
+        + embree_plans(3, 1);
     let total = setup.scenes.len() as u64 * setup.views.len() as u64 * per_view * rounds;
     let progress = progress_bar(total);
 
@@ -609,7 +631,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 rays,
                 workloads: Vec::new(),
                 engines: Vec::new(),
-                workload3_engines: Vec::new(),
+                engine_frames: Vec::new(),
             };
             let mut dpp_prims = None;
             for (workload, _, fused, unfused) in &plans {
@@ -649,9 +671,12 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 ] {
                     let swapped = library_with_embree(library, embree.clone(), mode)
                         .map_err(|e| Failure::Run(e.0))?;
-                    if let Some(path) = path_of(3) {
+                    for workload in [2, 3] {
+                        let Some(path) = path_of(workload) else {
+                            continue;
+                        };
                         progress.set_message(format!(
-                            "{} {view_name} workload3 {}",
+                            "{} {view_name} workload{workload} {}",
                             spec.name(),
                             engine.name()
                         ));
@@ -659,9 +684,11 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                         let (fused, _) = measure(
                             &fused, &swapped, &view, &pool, None, &args, &progress, false,
                         )?;
-                        view_result
-                            .workload3_engines
-                            .push(TracedByEngine { engine, fused });
+                        view_result.engine_frames.push(TracedByEngine {
+                            workload,
+                            engine,
+                            fused,
+                        });
                     }
                     let (Some(path), Some(dpp_prims)) = (path_of(1), &dpp_prims) else {
                         continue;

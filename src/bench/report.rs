@@ -105,34 +105,50 @@ impl Report {
             .any(|v| !v.engines.is_empty())
     }
 
-    fn has_workload3_engines(&self) -> bool {
+    fn has_engine_frames(&self, workload: u32) -> bool {
         self.scenes
             .iter()
             .flat_map(|s| &s.views)
-            .any(|v| !v.workload3_engines.is_empty())
+            .flat_map(|v| &v.engine_frames)
+            .any(|r| r.workload == workload)
     }
 
-    /// WORKLOAD3's fused frame with dpp's traversal and with Embree's.
-    fn write_workload3_engines(&self, md: &mut String) {
-        let _ = writeln!(md, "## WORKLOAD3: dpp against Embree, fused frame ms\n");
-        let _ = writeln!(md, "The fused WORKLOAD3 plan with Embree behind `intersect` and `occluded` (`rtcIntersect1` and `rtcOccluded1` per ray, or the 16-ray packet calls); everything else is the same. {}. Ratio: Embree's time over dpp's. The last two columns are the thread time (ms, summed over the threads) inside the `map<intersect>` ops (camera and reflected rays, closest hit) and the `map<occluded>` ops (occlusion and shadow rays, any hit), dpp / Embree single / Embree packet.\n", self.embree_test_words());
-        let _ = writeln!(md, "| scene | view | dpp | Embree single | Embree packet | single / dpp | packet / dpp | `intersect` thread ms | `occluded` thread ms |");
+    /// WORKLOAD2's or WORKLOAD3's fused frame with dpp's traversal and with
+    /// Embree's.
+    fn write_engine_frames(&self, md: &mut String, workload: u32) {
+        let _ = writeln!(
+            md,
+            "## WORKLOAD{workload}: dpp against Embree, fused frame ms\n"
+        );
+        let test = self.embree_test_words();
+        // WORKLOAD2 traces only closest hits, and its bar is its frame over the
+        // intersection of the same rays; WORKLOAD3 also traces any-hit rays.
+        let (calls, last_heading, last_words) = if workload == 2 {
+            (
+                "`intersect` (`rtcIntersect1` per ray, or `rtcIntersect16` packets)",
+                "frame / W1 intersect",
+                "the fused frame over WORKLOAD1's `map<intersect>` stage (unfused) with the same engine, on the same rays",
+            )
+        } else {
+            (
+                "`intersect` and `occluded` (`rtcIntersect1` and `rtcOccluded1` per ray, or the 16-ray packet calls)",
+                "`occluded` thread ms",
+                "the thread time inside the `map<occluded>` ops (occlusion and shadow rays, any hit)",
+            )
+        };
+        let _ = writeln!(md, "The fused WORKLOAD{workload} plan with Embree behind {calls}; everything else is the same. {test}. Ratio: Embree's time over dpp's. The last two columns, dpp / Embree single / Embree packet: the thread time (ms, summed over the threads) inside the `map<intersect>` ops (closest hit), and {last_words}.\n");
+        let _ = writeln!(md, "| scene | view | dpp | Embree single | Embree packet | single / dpp | packet / dpp | `intersect` thread ms | {last_heading} |");
         let _ = writeln!(
             md,
             "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
         );
         for scene in &self.scenes {
             for view in &scene.views {
-                let Some(own) = view.workloads.iter().find(|w| w.workload == 3) else {
+                let Some(own) = view.workloads.iter().find(|w| w.workload == workload) else {
                     continue;
                 };
-                let engine = |e: Engine| {
-                    view.workload3_engines
-                        .iter()
-                        .find(|r| r.engine == e)
-                        .map(|r| &r.fused)
-                };
-                let (single, packet) = (engine(Engine::EmbreeSingle), engine(Engine::EmbreePacket));
+                let engines = [Engine::EmbreeSingle, Engine::EmbreePacket];
+                let [single, packet] = engines.map(|e| view.engine_frame(workload, e));
                 let frame = |m: Option<&Measurement>| {
                     m.map_or("–".into(), |m| format!("{:.1}", m.mean_ms()))
                 };
@@ -150,6 +166,24 @@ impl Report {
                         .collect::<Vec<String>>()
                         .join(" / ")
                 };
+                let last = if workload == 2 {
+                    let over = |frame: Option<&Measurement>, intersect: Option<f64>| match (
+                        frame, intersect,
+                    ) {
+                        (Some(frame), Some(intersect)) => {
+                            format!("{:.2}×", frame.mean_ms() / intersect)
+                        }
+                        _ => "–".into(),
+                    };
+                    [
+                        over(Some(&own.fused), view.workload1_intersect_ms()),
+                        over(single, view.engine_workload1_intersect_ms(engines[0])),
+                        over(packet, view.engine_workload1_intersect_ms(engines[1])),
+                    ]
+                    .join(" / ")
+                } else {
+                    threads("occluded")
+                };
                 let _ = writeln!(
                     md,
                     "| {} | {} | {:.1} | {} | {} | {} | {} | {} | {} |",
@@ -161,7 +195,7 @@ impl Report {
                     ratio(single),
                     ratio(packet),
                     threads("intersect"),
-                    threads("occluded"),
+                    last,
                 );
             }
         }
@@ -367,8 +401,10 @@ impl Report {
             md.push('\n');
         }
 
-        if self.has_workload3_engines() {
-            self.write_workload3_engines(&mut md);
+        for workload in [2, 3] {
+            if self.has_engine_frames(workload) {
+                self.write_engine_frames(&mut md, workload);
+            }
         }
 
         let _ = writeln!(
@@ -521,14 +557,19 @@ impl Report {
                                     "agree": e.agrees(),
                                 })
                             }).collect::<Vec<_>>(),
-                            "workload3_engines": view.workload3_engines.iter().map(|e| {
-                                let own = view.workloads.iter().find(|w| w.workload == 3);
+                            "engine_frames": view.engine_frames.iter().map(|e| {
+                                let own = view.workloads.iter().find(|w| w.workload == e.workload);
+                                let over_intersect = view
+                                    .engine_workload1_intersect_ms(e.engine)
+                                    .map(|intersect| e.fused.mean_ms() / intersect);
                                 json!({
+                                    "workload": e.workload,
                                     "engine": e.engine.name(),
                                     "fused": measurement(&e.fused, None),
                                     "engine_over_dpp": own.map(|w| e.fused.mean_ms() / w.fused.mean_ms()),
                                     "intersect_thread_ms": e.fused.map_thread_ms("intersect"),
                                     "occluded_thread_ms": e.fused.map_thread_ms("occluded"),
+                                    "fused_over_workload1_intersect": over_intersect,
                                 })
                             }).collect::<Vec<_>>(),
                         })
