@@ -147,8 +147,8 @@ impl Report {
                 let Some(own) = view.workloads.iter().find(|w| w.workload == workload) else {
                     continue;
                 };
-                let engines = [Engine::EmbreeSingle, Engine::EmbreePacket];
-                let [single, packet] = engines.map(|e| view.engine_frame(workload, e));
+                let [single, packet] = [Engine::EmbreeSingle, Engine::EmbreePacket]
+                    .map(|e| view.engine_frame(workload, e));
                 let frame = |m: Option<&Measurement>| {
                     m.map_or("–".into(), |m| format!("{:.1}", m.mean_ms()))
                 };
@@ -167,20 +167,23 @@ impl Report {
                         .join(" / ")
                 };
                 let last = if workload == 2 {
-                    let over = |frame: Option<&Measurement>, intersect: Option<f64>| match (
-                        frame, intersect,
-                    ) {
-                        (Some(frame), Some(intersect)) => {
-                            format!("{:.2}×", frame.mean_ms() / intersect)
-                        }
-                        _ => "–".into(),
-                    };
-                    [
-                        over(Some(&own.fused), view.workload1_intersect_ms()),
-                        over(single, view.engine_workload1_intersect_ms(engines[0])),
-                        over(packet, view.engine_workload1_intersect_ms(engines[1])),
-                    ]
-                    .join(" / ")
+                    // Each engine's frame over its own WORKLOAD1 intersection.
+                    let intersects = [
+                        view.workload1_intersect_ms(),
+                        view.engine_workload1_intersect_ms(Engine::EmbreeSingle),
+                        view.engine_workload1_intersect_ms(Engine::EmbreePacket),
+                    ];
+                    [Some(&own.fused), single, packet]
+                        .iter()
+                        .zip(intersects)
+                        .map(|pair| match pair {
+                            (Some(frame), Some(intersect)) => {
+                                format!("{:.2}×", frame.mean_ms() / intersect)
+                            }
+                            _ => "–".into(),
+                        })
+                        .collect::<Vec<String>>()
+                        .join(" / ")
                 } else {
                     threads("occluded")
                 };
