@@ -10,10 +10,10 @@ mod scene_setup;
 mod volume_setup;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::compile::plan_text::plan_to_text;
 use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{listed_op_shares, run_plan, OutputValue, RunContext, StageTiming};
-use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{compile_file, CompileOptions, FunctorLibrary, Plan};
 use std::path::PathBuf;
 use std::process::ExitCode;

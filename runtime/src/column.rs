@@ -372,3 +372,22 @@ typed_accessors! {
     Vec3, Vec3, as_vec3, as_vec3_mut;
     Vec4, Vec4, as_vec4, as_vec4_mut;
 }
+
+/// `out[i] = src[source_of(i)]` for `i < len`. The runtime's own index maps
+/// (a fan-out's `i / k`) use it directly; `source_of` must stay below
+/// `src.len()`, so user-supplied indices go through [`gather`].
+pub(crate) fn gather_by_position(
+    src: &ColumnView<'_>,
+    len: usize,
+    source_of: &impl Fn(usize) -> usize,
+) -> Column {
+    map_primitive!(ColumnView => Column, src,
+    values => (0..len).map(|position| values[source_of(position)]).collect(),
+    ColumnView::Record { ty, fields } => Column::Record {
+        ty: *ty,
+        fields: fields
+            .iter()
+            .map(|field| Arc::new(gather_by_position(field, len, source_of)))
+            .collect(),
+    })
+}

@@ -5,6 +5,7 @@
 
 use crate::column::{Column, ColumnView};
 use crate::host::{HostValue, UniformSchema, Uniforms};
+use crate::monoid::MonoidOp;
 use crate::types::{ElemType, HostType, RecordRegistry};
 use crate::wgsl::{WgslRequest, WgslTwin};
 use std::any::Any;
@@ -25,18 +26,6 @@ pub enum FunctorKind {
     /// An associative, commutative binary operation with an identity: usable in
     /// `map`, `reduce`, `scan` and combining `scatter`.
     Monoid(MonoidOp),
-}
-
-/// The associative operations the backends implement natively for `reduce`, `scan`
-/// and combining `scatter` (their identities are well known per element type).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
-pub enum MonoidOp {
-    Add,
-    Mul,
-    Min,
-    Max,
-    Or,
-    And,
 }
 
 /// A type in a signature: concrete, or a variable bound at each call.

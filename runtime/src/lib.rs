@@ -1,22 +1,25 @@
-//! The dpp runtime: the plan compiler and the CPU backend.
+//! The dpp runtime: the plan compiler, the backend-neutral semantics and
+//! interpreter, and the CPU backend.
 
 pub mod column;
+pub mod elem;
 pub mod functor;
 pub mod host;
+pub mod monoid;
 pub mod types;
 
 pub use column::{Column, ColumnView};
 pub use functor::{
-    ArrayParam, CallContext, Functor, FunctorError, FunctorKind, FunctorLibrary, MonoidOp,
-    NamedParam, Signature, TypeConstraint, TypePattern,
+    ArrayParam, CallContext, Functor, FunctorError, FunctorKind, FunctorLibrary, NamedParam,
+    Signature, TypeConstraint, TypePattern,
 };
 pub use host::{HostValue, UniformSchema, Uniforms};
+pub use monoid::MonoidOp;
 pub use types::{ElemType, HostType, RecordId, RecordRegistry, RecordType};
 
 pub mod compile;
 pub mod cpu;
 pub mod generic;
-pub mod gpu;
 pub mod host_eval;
 pub mod interpret;
 pub mod wgsl;

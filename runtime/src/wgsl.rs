@@ -34,11 +34,11 @@
 //! - `fn {function}_fail(code: u32)`: records run-time failure `code` (an index
 //!   into [`WgslTwin::failures`]); the run then fails with that message.
 //!
-//! [`check_twin`] compiles a twin with such a prelude (naga) so that a functor's
-//! tests can check its twin without a GPU.
+//! The GPU crate's `check_twin` compiles a twin with such a prelude (naga), so
+//! that a functor's tests can check its twin without a GPU.
 
+use crate::elem::Element;
 use crate::functor::{FunctorError, FunctorKind, Signature};
-use crate::host::UniformSchema;
 use crate::types::{ElemType, HostType, RecordRegistry};
 use std::any::Any;
 use std::borrow::Cow;
@@ -90,17 +90,49 @@ pub struct WgslTwin {
     pub failures: Vec<String>,
 }
 
+/// The WGSL type of a primitive element (`vec3<f32>`); `None` for a record.
+pub fn primitive_type_wgsl(ty: ElemType) -> Option<&'static str> {
+    Some(match ty {
+        ElemType::Bool => "bool",
+        ElemType::U32 => "u32",
+        ElemType::I32 => "i32",
+        ElemType::F32 => "f32",
+        ElemType::Vec2 => "vec2<f32>",
+        ElemType::Vec3 => "vec3<f32>",
+        ElemType::Vec4 => "vec4<f32>",
+        ElemType::Record(_) => return None,
+    })
+}
+
 /// The WGSL type of an array element inside functions.
 pub fn elem_type_wgsl(ty: ElemType, records: &RecordRegistry) -> String {
-    match ty {
-        ElemType::Bool => "bool".into(),
-        ElemType::U32 => "u32".into(),
-        ElemType::I32 => "i32".into(),
-        ElemType::F32 => "f32".into(),
-        ElemType::Vec2 => "vec2<f32>".into(),
-        ElemType::Vec3 => "vec3<f32>".into(),
-        ElemType::Vec4 => "vec4<f32>".into(),
-        ElemType::Record(id) => records.get(id).name.clone(),
+    match (ty, primitive_type_wgsl(ty)) {
+        (_, Some(primitive)) => primitive.into(),
+        (ElemType::Record(id), None) => records.get(id).name.clone(),
+        (_, None) => unreachable!("every non-record type is primitive"),
+    }
+}
+
+/// `element` as a WGSL expression of its type, exact to the bit (floats are
+/// spelled by their bits, so infinities and `-0.0` survive).
+pub fn element_wgsl(element: Element) -> String {
+    let float = |x: f32| format!("bitcast<f32>({:#010x}u)", x.to_bits());
+    let vector = |ty: ElemType, components: &[f32]| {
+        let parts: Vec<String> = components.iter().map(|&x| float(x)).collect();
+        format!(
+            "{}({})",
+            primitive_type_wgsl(ty).unwrap_or_default(),
+            parts.join(", ")
+        )
+    };
+    match element {
+        Element::Bool(value) => value.to_string(),
+        Element::U32(value) => format!("{value}u"),
+        Element::I32(value) => format!("bitcast<i32>({:#010x}u)", value as u32),
+        Element::F32(value) => float(value),
+        Element::Vec2(value) => vector(ElemType::Vec2, &value.to_array()),
+        Element::Vec3(value) => vector(ElemType::Vec3, &value.to_array()),
+        Element::Vec4(value) => vector(ElemType::Vec4, &value.to_array()),
     }
 }
 
@@ -153,7 +185,7 @@ pub fn collect_dependencies(
     }
 }
 
-/// The parameter list of a twin's function, for [`check_twin`] and the backend:
+/// The parameter list of a twin's function, for the backend and its twin checker:
 /// `(name, wgsl type)` pairs in calling order.
 pub fn twin_parameters(
     signature: &Signature,
@@ -188,86 +220,6 @@ pub fn twin_parameters(
         params.push((named.name.to_string(), host_type_wgsl(named.ty).to_string()));
     }
     params
-}
-
-/// Uniform accessors that return zero: enough to compile a twin in isolation.
-fn placeholder_uniforms(schema: &UniformSchema) -> String {
-    let mut text = String::new();
-    for (record, fields) in &schema.records {
-        for (field, ty) in fields {
-            let wgsl = host_type_wgsl(*ty);
-            let _ = writeln!(
-                text,
-                "fn uniform_{record}_{field}() -> {wgsl} {{ return {wgsl}(); }}"
-            );
-        }
-    }
-    text
-}
-
-/// Compiles and validates (naga) a twin for `request` inside a placeholder
-/// prelude and a kernel that calls it the way the backend would; returns the
-/// validation error as text. For functors' own tests.
-pub fn check_twin(
-    signature: &Signature,
-    request: &WgslRequest<'_>,
-    twin: &WgslTwin,
-    uniforms: &UniformSchema,
-) -> Result<(), String> {
-    let records = request.records;
-    let function = request.function;
-    let mut source = record_structs(records);
-    source.push_str(&placeholder_uniforms(uniforms));
-    let mut modules = Vec::new();
-    let mut buffers = Vec::new();
-    collect_dependencies(twin, &mut modules, &mut buffers);
-    for (binding, buffer) in buffers.iter().enumerate() {
-        let _ = writeln!(
-            source,
-            "@group(1) @binding({binding}) var<storage, read> {}: {};",
-            buffer.name, buffer.wgsl_type
-        );
-    }
-    let _ = writeln!(source, "fn {function}_fail(code: u32) {{ }}");
-    if signature.kind == FunctorKind::Group {
-        let src = elem_type_wgsl(request.inputs[0], records);
-        let _ = writeln!(
-            source,
-            "fn {function}_src(i: u32) -> {src} {{ return {src}(); }}"
-        );
-    }
-    for module in &modules {
-        source.push_str(&module.source);
-        source.push('\n');
-    }
-    source.push_str(&twin.source);
-    source.push('\n');
-    let params = twin_parameters(signature, request.inputs, records);
-    let output = elem_type_wgsl(request.outputs[0], records);
-    let arguments: Vec<String> = params.iter().map(|(_, ty)| format!("{ty}()")).collect();
-    let _ = writeln!(
-        source,
-        "@group(0) @binding(0) var<storage, read_write> check_sink: array<u32>;\n\
-         @compute @workgroup_size(64)\n\
-         fn main(@builtin(global_invocation_id) id: vec3<u32>) {{\n\
-         \x20   let value: {output} = {function}({});\n\
-         \x20   check_sink[id.x] = 0u;\n\
-         }}",
-        arguments.join(", ")
-    );
-    validate_wgsl(&source)
-}
-
-/// Parses and validates a whole WGSL module; the error carries the source location.
-pub fn validate_wgsl(source: &str) -> Result<(), String> {
-    let module = naga::front::wgsl::parse_str(source).map_err(|e| e.emit_to_string(source))?;
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::empty(),
-    )
-    .validate(&module)
-    .map_err(|e| e.emit_to_string(source))?;
-    Ok(())
 }
 
 /// The error a functor without a twin gives the GPU backend.

@@ -2,9 +2,10 @@
 //! (small) test chunk size so that the multi-chunk paths run.
 
 use dpp_runtime::cpu::kernels::{
-    combine_columns, gather, identity, monoid_supports, reduce, reduce_groups, run_chunked, scan,
-    scatter, scatter_combine, Element, KernelError, PrimitiveElement, DEFAULT_CHUNK,
+    gather, reduce, run_chunked, scan, scatter, scatter_combine, DEFAULT_CHUNK,
 };
+use dpp_runtime::elem::{Element, KernelError, PrimitiveElement};
+use dpp_runtime::monoid::{combine_columns, identity, monoid_supports, reduce_groups};
 use dpp_runtime::{Column, ElemType, HostValue, MonoidOp, RecordId};
 use glam::{Vec2, Vec3, Vec4};
 use proptest::prelude::*;

@@ -20,9 +20,9 @@ mod report;
 
 use crate::scene_setup::{self, SceneRequest, SceneSetup};
 use crate::{volume_setup, Backend, Failure};
+use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, OpTiming, OutputValue, RunContext, RunResult, StageTiming};
-use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{CompileOptions, FunctorLibrary, Plan};
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
 use dpp_tracer::camera::sample_offset;

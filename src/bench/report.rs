@@ -2,8 +2,8 @@
 //! tables) and as JSON.
 
 use super::{ms, Engine, Measurement, SceneResult, AGREEMENT};
+use dpp_gpu::GpuContext;
 use dpp_runtime::cpu::exec::listed_op_shares;
-use dpp_runtime::gpu::GpuContext;
 use serde_json::{json, Value};
 use std::fmt::Write;
 

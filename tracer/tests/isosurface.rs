@@ -4,10 +4,10 @@
 //! exact triangle count, and the triangles do not depend on fusion, chunk size
 //! or thread count.
 
+use dpp_gpu::{gpu_for_tests, run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::compile::{compile_file, CompileOptions};
 use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
-use dpp_runtime::gpu::{gpu_for_tests, run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{Column, HostValue};
 use dpp_tracer::functors::isosurface::{
     triangles_to_mesh, volume_uniforms, write_obj, write_ply, TriangleColumns, VolumeResources,

@@ -6,8 +6,8 @@
 //! it is the same slot (that is how loop-carried state is written); other
 //! bindings get fresh slots, so most variables have a single definition.
 
-use crate::functor::MonoidOp;
 use crate::host::HostValue;
+use crate::monoid::MonoidOp;
 use crate::types::{ElemType, HostType};
 use dpp_dsl::ast::{BinaryOp, UnaryOp};
 use dpp_dsl::Span;

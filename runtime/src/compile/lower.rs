@@ -1394,7 +1394,7 @@ impl Lowerer<'_, '_> {
     }
 }
 
-fn monoid(signature: &Signature) -> Option<crate::functor::MonoidOp> {
+fn monoid(signature: &Signature) -> Option<crate::monoid::MonoidOp> {
     match signature.kind {
         FunctorKind::Monoid(op) => Some(op),
         _ => None,

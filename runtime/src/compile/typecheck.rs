@@ -2,8 +2,9 @@
 //! every op against its functor's signature and its primitive's rules.
 
 use super::ir::*;
-use crate::functor::{FunctorLibrary, MonoidOp, TypePattern};
+use crate::functor::{FunctorLibrary, TypePattern};
 use crate::host::HostValue;
+use crate::monoid::monoid_supports;
 use crate::types::{ElemType, HostType, RecordRegistry};
 use dpp_dsl::ast::{BinaryOp, UnaryOp};
 use dpp_dsl::{did_you_mean, Diagnostic, Span};
@@ -45,14 +46,6 @@ struct Checker<'a> {
     library: &'a FunctorLibrary,
     diagnostics: &'a mut Vec<Diagnostic>,
     definitions: Vec<u32>,
-}
-
-/// The host type of a monoid's result over arrays of `ty`, if it supports `ty`.
-pub fn monoid_supports(op: MonoidOp, ty: ElemType) -> bool {
-    match op {
-        MonoidOp::Add | MonoidOp::Mul | MonoidOp::Min | MonoidOp::Max => ty.is_numeric(),
-        MonoidOp::Or | MonoidOp::And => ty == ElemType::Bool,
-    }
 }
 
 /// The host type a reduction of `ty` elements produces.

@@ -5,10 +5,11 @@
 //! its ops, so a fused stage's profile still says where its time went.
 
 use super::column_pool::{ColumnPool, Contents};
-use super::kernels::{self, Element, ScanTotal};
+use super::kernels::{self, ScanTotal};
 use super::shared_scatter::{Claimed, Owners, ScatterClaims, SharedTarget};
 use crate::column::{Column, ColumnView};
 use crate::compile::ir::*;
+use crate::elem::Element;
 use crate::functor::{CallContext, FunctorLibrary};
 use crate::host::Uniforms;
 use crate::interpret::{
@@ -403,7 +404,7 @@ impl StageRun<'_, '_> {
         number: usize,
     ) -> Result<(), RunError> {
         let records = &self.context.library.records;
-        let kernel_error = |e: kernels::KernelError| error(e.to_string());
+        let kernel_error = |e: crate::elem::KernelError| error(e.to_string());
         match &op.kind {
             OpKind::Scatter {
                 combine: Some(combine),

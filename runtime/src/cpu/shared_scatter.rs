@@ -16,11 +16,11 @@
 //! with one atomic. Scatters of one stage with the same indices and mask into
 //! targets of the same length share their claims.
 
-use super::kernels::{
-    check_length, check_same_type, scatter, typed_slice, with_element_type, KernelError,
-    PrimitiveElement,
-};
+use super::kernels::scatter;
 use crate::column::{Column, ColumnView};
+use crate::elem::{
+    check_length, check_same_type, typed_slice, with_element_type, KernelError, PrimitiveElement,
+};
 use crate::types::ElemType;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};

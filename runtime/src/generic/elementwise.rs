@@ -5,7 +5,7 @@ use super::{
     SCALAR_OR_BOOL, U32,
 };
 use crate::column::{Column, ColumnView};
-use crate::cpu::kernels::{check_length, typed_slice, with_element_type, PrimitiveElement};
+use crate::elem::{check_length, typed_slice, with_element_type, PrimitiveElement};
 use crate::functor::{
     CallContext, Functor, FunctorError, FunctorKind, NamedParam, Signature, TypePattern,
 };

@@ -4,11 +4,12 @@
 
 use super::elementwise::{conversion_wgsl, conversions_module, ScalarConversions};
 use super::{functor, signature, unexpected_type, Body, ANY, F32, NUMERIC, SCALAR_OR_BOOL, U32};
+use crate::column::gather_by_position;
 use crate::column::{Column, ColumnView};
-use crate::cpu::kernels::{
-    gather_by_position, reduce_groups, typed_slice, with_element_type, KernelError,
-};
-use crate::functor::{CallContext, Functor, FunctorError, FunctorKind, MonoidOp};
+use crate::elem::{typed_slice, with_element_type, KernelError};
+use crate::functor::{CallContext, Functor, FunctorError, FunctorKind};
+use crate::monoid::reduce_groups;
+use crate::monoid::MonoidOp;
 use crate::types::ElemType;
 use crate::wgsl::WgslRequest;
 use std::sync::Arc;

@@ -7,11 +7,12 @@ mod elementwise;
 mod grouped;
 
 use crate::column::{Column, ColumnView};
-use crate::cpu::kernels::combine_columns;
 use crate::functor::{
-    ArrayParam, CallContext, Functor, FunctorError, FunctorKind, FunctorLibrary, MonoidOp,
-    Signature, TypeConstraint, TypePattern,
+    ArrayParam, CallContext, Functor, FunctorError, FunctorKind, FunctorLibrary, Signature,
+    TypeConstraint, TypePattern,
 };
+use crate::monoid::combine_columns;
+use crate::monoid::MonoidOp;
 use crate::types::ElemType;
 use crate::wgsl::{elem_type_wgsl, twin_parameters, WgslModule, WgslRequest, WgslTwin};
 use std::fmt::Display;
@@ -281,7 +282,7 @@ fn monoid_functors() -> Vec<Arc<dyn Functor>> {
         .collect()
 }
 
-/// `a op b` as the CPU's [`MonoidElement`](crate::cpu::kernels::MonoidElement)
+/// `a op b` as the CPU's [`MonoidElement`](crate::monoid::MonoidElement)
 /// computes it: integers wrap (as WGSL's do); float `min`/`max`, per
 /// component for vectors, return the other operand where one is NaN and `a`
 /// on a tie (Rust's `f32::min`; the sign of a zero result is unspecified on
@@ -296,7 +297,7 @@ fn monoid_twin(op: MonoidOp, request: &WgslRequest<'_>) -> Result<Body, FunctorE
 /// The statements of `fn (a: T, b: T) -> T { … }` computing `a op b`: the
 /// monoid twins' and the GPU backend's reductions, scans and combining
 /// scatters, one definition for both.
-pub(crate) fn monoid_statements(op: MonoidOp, ty: ElemType) -> Option<String> {
+pub fn monoid_statements(op: MonoidOp, ty: ElemType) -> Option<String> {
     let (name, better) = match op {
         MonoidOp::Min => ("min", "<"),
         MonoidOp::Max => ("max", ">"),

@@ -876,7 +876,7 @@ pub(crate) mod test_support {
             resources,
         };
         let twin = functor.wgsl(&request).map_err(|e| e.0)?;
-        dpp_runtime::wgsl::check_twin(signature, &request, &twin, &library.uniforms)?;
+        dpp_gpu::check_twin(signature, &request, &twin, &library.uniforms)?;
         let fail = format!("{function}_fail(");
         let mut raised: Vec<usize> = twin
             .source

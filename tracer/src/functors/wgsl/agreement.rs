@@ -19,8 +19,8 @@ use crate::mesh::TriangleMesh;
 use crate::scene::TraceScene;
 use crate::shading::{Material, MeshMaterials, PointLight};
 use crate::volume::Volume;
+use dpp_gpu::{gpu_for_tests, run_functor_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::column::{ulp_distance, Scalar as Cell};
-use dpp_runtime::gpu::{gpu_for_tests, run_functor_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::{
     CallContext, Column, ElemType, FunctorError, FunctorLibrary, HostValue, RecordRegistry,
     TypePattern, Uniforms,

@@ -12,9 +12,10 @@ use crate::functors::isosurface::{register_isosurface_functors, VolumeResources}
 use crate::functors::test_support::{checked_twin, Fixture};
 use crate::shading::PointLight;
 use crate::volume::generate;
+use dpp_gpu::validate_wgsl;
 use dpp_runtime::wgsl::{
     collect_dependencies, elem_type_wgsl, host_type_wgsl, record_structs, twin_parameters,
-    validate_wgsl, GpuBuffer, WgslTwin,
+    GpuBuffer, WgslTwin,
 };
 use dpp_runtime::FunctorKind;
 use glam::{UVec3, Vec3};

@@ -6,15 +6,15 @@
 //! atomics) or leaves its inputs in arrays for the sink kernels that follow
 //! (see `exec.rs`).
 
-use super::array::{allocate_array, copy_array, GpuArray};
-use super::exec::GpuBackend;
-use super::monoid;
-use super::shader::{Access, ShaderBuilder};
-use crate::compile::ir::*;
-use crate::functor::FunctorKind;
-use crate::interpret::{elementwise_materialised, error, RunError, Slots, StageCall};
-use crate::types::ElemType;
-use crate::wgsl::{collect_dependencies, elem_type_wgsl, WgslRequest};
+use crate::array::{allocate_array, copy_array, GpuArray};
+use crate::exec::GpuBackend;
+use crate::monoid;
+use crate::shader::{Access, ShaderBuilder};
+use dpp_runtime::compile::ir::*;
+use dpp_runtime::functor::FunctorKind;
+use dpp_runtime::interpret::{elementwise_materialised, error, RunError, Slots, StageCall};
+use dpp_runtime::types::ElemType;
+use dpp_runtime::wgsl::{collect_dependencies, elem_type_wgsl, WgslRequest};
 use std::collections::HashMap;
 use std::fmt::Write;
 
@@ -39,11 +39,11 @@ pub enum SinkWork {
         target: GpuArray,
     },
     Reduce {
-        op: crate::functor::MonoidOp,
+        op: dpp_runtime::monoid::MonoidOp,
         values: GpuArray,
     },
     Scan {
-        op: crate::functor::MonoidOp,
+        op: dpp_runtime::monoid::MonoidOp,
         exclusive: bool,
         values: GpuArray,
         flags: Option<GpuArray>,
@@ -86,11 +86,11 @@ struct Generator<'b, 'c, 'r> {
     call: &'b StageCall<'r>,
     builder: ShaderBuilder<'r>,
     locals: HashMap<VarId, Value>,
-    twins: Vec<crate::wgsl::WgslTwin>,
+    twins: Vec<dpp_runtime::wgsl::WgslTwin>,
 }
 
 impl Generator<'_, '_, '_> {
-    fn gpu_error(e: super::GpuError) -> RunError {
+    fn gpu_error(e: crate::GpuError) -> RunError {
         error(e.0)
     }
 
@@ -297,7 +297,7 @@ impl Generator<'_, '_, '_> {
                             .map_err(error)?;
                             let components: Vec<String> = match ty {
                                 ElemType::Vec2 | ElemType::Vec3 | ElemType::Vec4 => {
-                                    ["x", "y", "z", "w"][..super::array::words_of(ty)]
+                                    ["x", "y", "z", "w"][..crate::array::words_of(ty)]
                                         .iter()
                                         .map(|c| format!("{name}_value.{c}"))
                                         .collect()
@@ -328,7 +328,7 @@ impl Generator<'_, '_, '_> {
                             .map_err(Self::gpu_error)?;
                             let field = self.builder.field(&winner.fields[0], Access::Atomic);
                             let update = monoid::atomic_update(
-                                crate::functor::MonoidOp::Max,
+                                dpp_runtime::monoid::MonoidOp::Max,
                                 ElemType::U32,
                                 &field,
                                 &mut self.builder.functions,
@@ -396,7 +396,7 @@ impl Generator<'_, '_, '_> {
     fn named_arguments(
         &mut self,
         op: &Op,
-        values: &crate::interpret::OpHostValues,
+        values: &dpp_runtime::interpret::OpHostValues,
         arguments: &mut Vec<String>,
     ) -> Result<(), RunError> {
         for ((name, _), value) in op.named.iter().zip(&values.named) {

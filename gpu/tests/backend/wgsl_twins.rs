@@ -2,8 +2,9 @@
 //! every element type its signature admits. What the twins compute is compared
 //! with the CPU by the GPU backend's tests, which need a GPU.
 
+use dpp_gpu::check_twin;
 use dpp_runtime::generic::register_generic_functors;
-use dpp_runtime::wgsl::{check_twin, no_twin, WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::{no_twin, WgslRequest, WgslTwin};
 use dpp_runtime::{
     ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
     FunctorLibrary, RecordId, RecordType, Signature, TypeConstraint, TypePattern,

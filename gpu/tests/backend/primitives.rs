@@ -2,11 +2,9 @@
 //! → plan → CPU backend) on random inputs, against plain sequential
 //! references; fused and unfused, on 1 and 2 threads, must agree bit for bit.
 
-mod common;
-
+use dpp_gpu::{run_plan_gpu, GpuContext, GpuLimits, GpuRunContext};
 use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext, RunResult};
-use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuLimits, GpuRunContext};
 use dpp_runtime::*;
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
@@ -15,13 +13,13 @@ use std::path::Path;
 use std::sync::Arc;
 
 fn library() -> FunctorLibrary {
-    let mut library = common::library();
+    let mut library = crate::common::library();
     for (name, ty) in [
         ("u32Data", ElemType::U32),
         ("f32Data", ElemType::F32),
         ("boolData", ElemType::Bool),
     ] {
-        common::register_data_functor(&mut library, name, ty);
+        crate::data::register_data_functor(&mut library, name, ty);
     }
     library
 }
@@ -162,8 +160,8 @@ fn compile_case(case: &Case, library: &FunctorLibrary, fuse: bool) -> Plan {
     .unwrap_or_else(|e| panic!("{}", e.render(false)))
 }
 
-fn data_of(case: &Case) -> common::Data {
-    common::Data::new(vec![
+fn data_of(case: &Case) -> crate::data::Data {
+    crate::data::Data::new(vec![
         Column::U32(case.a.clone()),
         Column::U32(case.b.clone()),
         Column::U32(case.idx.clone()),
@@ -473,7 +471,7 @@ fn fused_stages_are_timed_op_by_op_on_the_cpu() {
         adding.ops.iter().any(|op| !op.thread_time.is_zero()),
         "{adding:?}"
     );
-    if let Some(gpu) = common::gpu() {
+    if let Some(gpu) = crate::gpu() {
         let result = run_gpu_result(&case, true, gpu);
         assert!(
             result.profile.iter().all(|t| t.ops.is_empty()),
@@ -490,7 +488,7 @@ proptest! {
     /// bit for bit, float sums within rounding (they add in another order).
     #[test]
     fn every_primitive_on_the_gpu_matches_the_reference(case in case()) {
-        let Some(gpu) = common::gpu() else { return Ok(()) };
+        let Some(gpu) = crate::gpu() else { return Ok(()) };
         let fused = run_gpu(&case, true, gpu);
         check_against_reference(&case, &fused);
         check_against_reference(&case, &run_gpu(&case, false, gpu));
@@ -502,7 +500,7 @@ proptest! {
 /// the results still match.
 #[test]
 fn arrays_split_into_segments_still_match() {
-    let Some(gpu) = common::gpu() else { return };
+    let Some(gpu) = crate::gpu() else { return };
     let small = gpu.with_limits(GpuLimits {
         max_binding_bytes: 3000,
         ..gpu.limits
@@ -517,7 +515,7 @@ fn arrays_split_into_segments_still_match() {
 /// workgroups of 64, so 16 × 5.
 #[test]
 fn many_workgroups_use_a_two_dimensional_dispatch() {
-    let Some(gpu) = common::gpu() else { return };
+    let Some(gpu) = crate::gpu() else { return };
     let narrow = gpu.with_limits(GpuLimits {
         max_workgroups_per_dimension: 16,
         ..gpu.limits
@@ -532,7 +530,7 @@ fn many_workgroups_use_a_two_dimensional_dispatch() {
 /// partial results), the reused one must be cleared first.
 #[test]
 fn runs_that_reuse_buffers_still_start_from_zero() {
-    let Some(gpu) = common::gpu() else { return };
+    let Some(gpu) = crate::gpu() else { return };
     // A context with its own, empty pool, so that the runs below reuse each
     // other's buffers.
     let own_pool = gpu.with_limits(gpu.limits);
@@ -583,8 +581,8 @@ fn runs_that_reuse_cpu_arrays_still_start_from_zero() {
 /// reads back element for element.
 #[test]
 fn large_arrays_read_back_across_pieces_and_segments() {
-    use dpp_runtime::gpu::array::{download, upload};
-    let Some(gpu) = common::gpu() else { return };
+    use dpp_gpu::array::{download, upload};
+    let Some(gpu) = crate::gpu() else { return };
     let segmented = gpu.with_limits(GpuLimits {
         max_binding_bytes: 3_000_000,
         ..gpu.limits

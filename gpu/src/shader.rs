@@ -2,10 +2,10 @@
 //! parameters, status), the typed accessors generated for them, and the
 //! parameter words it reads. Stage kernels and the sink kernels both use it.
 
-use super::array::{Field, GpuArray};
-use crate::host::HostValue;
-use crate::types::{ElemType, RecordRegistry};
-use crate::wgsl::elem_type_wgsl;
+use crate::array::{Field, GpuArray};
+use dpp_runtime::host::HostValue;
+use dpp_runtime::types::{ElemType, RecordRegistry};
+use dpp_runtime::wgsl::elem_type_wgsl;
 use std::fmt::Write;
 use std::sync::Arc;
 
@@ -138,8 +138,8 @@ impl<'r> ShaderBuilder<'r> {
 
     /// A `fill`'s value as its array element, converted as the CPU converts it.
     pub fn param_element(&mut self, value: HostValue) -> Result<String, String> {
-        let column = crate::column::Column::filled(value, 1)?;
-        let words: Vec<String> = super::array::column_words(&column)
+        let column = dpp_runtime::column::Column::filled(value, 1)?;
+        let words: Vec<String> = crate::array::column_words(&column)
             .into_iter()
             .map(|w| self.param_u32(w))
             .collect();
@@ -346,7 +346,7 @@ pub fn value_to_words(ty: ElemType, value: &str) -> Vec<String> {
         ElemType::U32 => vec![value.to_string()],
         ElemType::I32 | ElemType::F32 => vec![format!("bitcast<u32>({value})")],
         ElemType::Vec2 | ElemType::Vec3 | ElemType::Vec4 => COMPONENTS
-            [..super::array::words_of(ty)]
+            [..crate::array::words_of(ty)]
             .iter()
             .map(|c| format!("bitcast<u32>({value}.{c})"))
             .collect(),

@@ -2,9 +2,9 @@
 //! on the CPU), each field split into segments no longer than the adapter's
 //! largest storage binding. Every element of a field is `words` 32-bit words.
 
-use super::device::{GpuContext, GpuError};
-use crate::column::Column;
-use crate::types::{ElemType, RecordRegistry};
+use crate::device::{GpuContext, GpuError};
+use dpp_runtime::column::Column;
+use dpp_runtime::types::{ElemType, RecordRegistry};
 use glam::{Vec2, Vec3, Vec4};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};

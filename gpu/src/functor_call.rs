@@ -1,15 +1,15 @@
 //! One functor applied once on the GPU to given arrays: how a functor's tests
 //! run its twin on the same input as its Rust code.
 
-use super::array::upload;
-use super::exec::{run_plan_gpu_with_inputs, GpuRunContext};
-use crate::column::Column;
-use crate::compile::ir::*;
-use crate::functor::{FunctorKind, TypePattern};
-use crate::host::HostValue;
-use crate::interpret::{error, OutputValue, RunError};
-use crate::types::ElemType;
+use crate::array::upload;
+use crate::exec::{run_plan_gpu_with_inputs, GpuRunContext};
 use dpp_dsl::Span;
+use dpp_runtime::column::Column;
+use dpp_runtime::compile::ir::*;
+use dpp_runtime::functor::{FunctorKind, TypePattern};
+use dpp_runtime::host::HostValue;
+use dpp_runtime::interpret::{error, OutputValue, RunError};
+use dpp_runtime::types::ElemType;
 
 /// `map<name>(inputs…)`, `gather<name>(inputs[0], group: k)` or
 /// `scatter<name>(inputs[0], fanout: k)` by the functor's kind, with named

@@ -5,14 +5,12 @@
 //! and of the CPU chunk (4096). Each case states how closely the backends
 //! must agree and why.
 
-mod common;
-
-use common::Data;
+use crate::data::Data;
+use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::column::{ulp_distance, Scalar as Cell};
 use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
 use dpp_runtime::cpu::kernels::DEFAULT_CHUNK;
-use dpp_runtime::gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::interpret::{RunError, RunResult};
 use dpp_runtime::*;
 use glam::{Vec2, Vec3, Vec4};
@@ -643,7 +641,7 @@ struct Setup {
 }
 
 fn setup() -> Setup {
-    let mut library = common::library();
+    let mut library = crate::common::library();
     let pair = library.records.register(RecordType {
         name: "Pair".into(),
         fields: vec![
@@ -654,7 +652,7 @@ fn setup() -> Setup {
         doc: "a test record".into(),
     });
     for ty in ANY {
-        common::register_data_functor(&mut library, ty.data_functor(), ty.elem_type(pair));
+        crate::data::register_data_functor(&mut library, ty.data_functor(), ty.elem_type(pair));
     }
     Setup { library, pair }
 }
@@ -936,7 +934,7 @@ fn check(setup: &Setup, gpu: &GpuContext, case: &Case) -> Vec<String> {
 
 /// Runs every case of `table`; fails with every disagreement found.
 fn check_table(table: &[Case]) {
-    let Some(gpu) = common::gpu() else { return };
+    let Some(gpu) = crate::gpu() else { return };
     let setup = setup();
     probe_subnormals(&setup, gpu);
     let failures: Vec<String> = table
@@ -987,7 +985,7 @@ fn seeds_are_taken_modulo_2_to_the_32_on_both_backends() {
 /// takes whole) is an error naming the argument, never a wrapped value.
 #[test]
 fn integer_arguments_beyond_32_bits_are_an_error_on_the_gpu() {
-    let Some(gpu) = common::gpu() else { return };
+    let Some(gpu) = crate::gpu() else { return };
     let setup = setup();
     let case = case(
         "hash",
@@ -1012,7 +1010,7 @@ fn integer_arguments_beyond_32_bits_are_an_error_on_the_gpu() {
 fn every_generic_functor_and_type_has_a_case() {
     let setup = setup();
     let tables = [ELEMENTWISE, NAMED, MONOIDS, GROUPED_CASES];
-    for functor in common::library().iter() {
+    for functor in crate::common::library().iter() {
         let signature = functor.signature();
         let variables: Vec<TypeConstraint> = signature
             .inputs

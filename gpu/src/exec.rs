@@ -4,19 +4,20 @@
 //! only where it must read: a `reduce` result the plan's control flow uses,
 //! the outputs, and (when profiling) the end of every stage.
 
-use super::array::{allocate_array, download, download_words, wait, GpuArray, RunBuffers};
-use super::device::{GpuContext, GpuError};
-use super::monoid;
-use super::shader::{Access, Binding, ShaderBuilder, WORKGROUP};
-use super::stage::{build_stage_kernel, SinkWork};
-use crate::column::Column;
-use crate::functor::{FunctorLibrary, MonoidOp};
-use crate::host::{HostValue, Uniforms};
-use crate::interpret::{
+use crate::array::{allocate_array, download, download_words, wait, GpuArray, RunBuffers};
+use crate::device::{GpuContext, GpuError};
+use crate::monoid;
+use crate::shader::{Access, Binding, ShaderBuilder, WORKGROUP};
+use crate::stage::{build_stage_kernel, SinkWork};
+use dpp_runtime::column::Column;
+use dpp_runtime::functor::FunctorLibrary;
+use dpp_runtime::host::{HostValue, Uniforms};
+use dpp_runtime::interpret::{
     error, interpret_with_inputs, Backend, RunError, RunResult, Slots, StageCall, StageMeasurement,
 };
-use crate::types::ElemType;
-use crate::wgsl::{host_type_wgsl, record_structs, GpuBuffer};
+use dpp_runtime::monoid::MonoidOp;
+use dpp_runtime::types::ElemType;
+use dpp_runtime::wgsl::{host_type_wgsl, record_structs, GpuBuffer};
 use std::any::Any;
 use std::collections::HashMap;
 use std::fmt::Write;
@@ -28,7 +29,7 @@ pub struct GpuRunContext<'a> {
     pub gpu: &'a GpuContext,
     pub library: &'a FunctorLibrary,
     pub uniforms: &'a Uniforms,
-    /// Scene data for the functors' twins (see [`crate::CallContext::resources`]).
+    /// Scene data for the functors' twins (see [`dpp_runtime::CallContext::resources`]).
     pub resources: &'a (dyn Any + Send + Sync),
     /// Wait for every stage and time it on the device (timestamp queries where
     /// the adapter has them, else host time around the wait).
@@ -37,7 +38,7 @@ pub struct GpuRunContext<'a> {
 
 /// Runs `plan` on the GPU.
 pub fn run_plan_gpu(
-    plan: &crate::Plan,
+    plan: &dpp_runtime::Plan,
     context: &GpuRunContext<'_>,
 ) -> Result<RunResult, RunError> {
     run_plan_gpu_with_inputs(plan, context, Vec::new())
@@ -45,9 +46,9 @@ pub fn run_plan_gpu(
 
 /// Runs `plan` with some array variables already on the device.
 pub(crate) fn run_plan_gpu_with_inputs(
-    plan: &crate::Plan,
+    plan: &dpp_runtime::Plan,
     context: &GpuRunContext<'_>,
-    inputs: Vec<(crate::compile::ir::VarId, GpuArray)>,
+    inputs: Vec<(dpp_runtime::compile::ir::VarId, GpuArray)>,
 ) -> Result<RunResult, RunError> {
     let gpu = context.gpu;
     let records = &context.library.records;
@@ -95,26 +96,26 @@ fn uniform_layout(context: &GpuRunContext<'_>) -> (Vec<u32>, String) {
             let wgsl = host_type_wgsl(*ty);
             let float = |x: f32| x.to_bits();
             let (value_words, expression): (Vec<u32>, String) = match ty {
-                crate::HostType::Bool => (
+                dpp_runtime::HostType::Bool => (
                     vec![u32::from(value.and_then(|v| v.as_bool()).unwrap_or(false))],
                     format!("uniforms[{offset}] != 0u"),
                 ),
-                crate::HostType::Int => (
+                dpp_runtime::HostType::Int => (
                     vec![value.and_then(|v| v.as_int()).unwrap_or(0) as i32 as u32],
                     format!("bitcast<i32>(uniforms[{offset}])"),
                 ),
-                crate::HostType::Float => (
+                dpp_runtime::HostType::Float => (
                     vec![float(value.and_then(|v| v.as_f32()).unwrap_or(0.0))],
                     format!("bitcast<f32>(uniforms[{offset}])"),
                 ),
                 vector => {
                     let components: Vec<f32> = match (vector, value) {
-                        (crate::HostType::Vec2, v) => v
+                        (dpp_runtime::HostType::Vec2, v) => v
                             .and_then(|v| v.as_vec2())
                             .unwrap_or_default()
                             .to_array()
                             .to_vec(),
-                        (crate::HostType::Vec3, v) => v
+                        (dpp_runtime::HostType::Vec3, v) => v
                             .and_then(|v| v.as_vec3())
                             .unwrap_or_default()
                             .to_array()
@@ -384,7 +385,7 @@ impl GpuBackend<'_> {
             return Ok(found.clone());
         }
         // Validate first so a bad twin is a clear error, not a device loss.
-        crate::wgsl::validate_wgsl(source).map_err(|e| {
+        crate::validate_wgsl(source).map_err(|e| {
             error(format!(
                 "internal error: a generated GPU kernel does not compile:\n{e}"
             ))
@@ -615,7 +616,7 @@ fn read_buffer_words(
     buffer: &wgpu::Buffer,
     words: usize,
 ) -> Result<Vec<u32>, GpuError> {
-    let field = super::array::Field {
+    let field = crate::array::Field {
         ty: ElemType::U32,
         len: words,
         segment: words,
@@ -691,7 +692,7 @@ impl Backend for GpuBackend<'_> {
         }
         for (output, op, result) in reduced {
             let value = if call.len == 0 {
-                crate::cpu::kernels::identity(op, result.ty)
+                dpp_runtime::monoid::identity(op, result.ty)
                     .map_err(|e| error(e.to_string()))?
                     .to_host()
             } else {
