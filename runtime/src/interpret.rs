@@ -5,9 +5,9 @@
 //! backends cannot disagree about control flow.
 
 use crate::column::Column;
+use crate::compile::host_eval::{eval_host, HostEnvironment};
 use crate::compile::ir::*;
 use crate::host::{HostValue, Uniforms};
-use crate::host_eval::{eval_host, HostEnvironment};
 use crate::types::{ElemType, RecordRegistry};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -580,22 +580,13 @@ impl<'a, B: Backend> Interpreter<'a, B> {
     }
 }
 
-/// Whether `op` combines its stage's elements into a result that is complete
-/// only when the stage ends (scatter, reduce, scan).
-pub fn is_sink(op: &Op) -> bool {
-    matches!(
-        op.kind,
-        OpKind::Scatter { .. } | OpKind::Reduce { .. } | OpKind::Scan { .. }
-    )
-}
-
 /// The variables a stage writes element by element: everything it
 /// materialises but its sinks' results, which each sink assembles itself.
 pub fn elementwise_materialised(stage: &Stage) -> Vec<VarId> {
     let sink_outputs: Vec<VarId> = stage
         .ops
         .iter()
-        .filter(|op| is_sink(op))
+        .filter(|op| op.is_sink())
         .map(|op| op.outputs[0])
         .collect();
     stage

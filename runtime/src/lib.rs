@@ -20,7 +20,6 @@ pub use types::{ElemType, HostType, RecordId, RecordRegistry, RecordType};
 pub mod compile;
 pub mod cpu;
 pub mod generic;
-pub mod host_eval;
 pub mod interpret;
 pub mod wgsl;
 

@@ -10,9 +10,8 @@
 mod common;
 
 use common::{check, diagnostics_text, trim_indent};
-use dpp_runtime::compile::ir::{node_reads, walk_nodes, Plan, VarType};
+use dpp_runtime::compile::ir::{node_reads, node_writes, walk_nodes, Plan, VarType};
 use dpp_runtime::compile::plan_text::host_text;
-use dpp_runtime::compile::typecheck::node_writes;
 use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, RunContext};
 use dpp_runtime::*;

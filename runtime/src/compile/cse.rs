@@ -5,7 +5,6 @@
 //! the values its iterations rewrite.
 
 use super::ir::*;
-use super::typecheck::node_writes;
 use std::collections::HashMap;
 
 pub fn eliminate_common_subexpressions(body: &mut Vec<Node>, vars: &mut [VarInfo]) {

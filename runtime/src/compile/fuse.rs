@@ -13,7 +13,6 @@
 //! stage either: it moves after the stage that makes its value.
 
 use super::ir::*;
-use super::typecheck::node_writes;
 use crate::host::HostValue;
 use dpp_dsl::ast::BinaryOp;
 use std::collections::HashSet;

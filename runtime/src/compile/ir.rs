@@ -102,6 +102,77 @@ impl HostFunction {
     }
 }
 
+/// The primitives: the callees that take a functor in angle brackets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Primitive {
+    Map,
+    Gather,
+    Scatter,
+    Reduce,
+    Scan,
+    ExclusiveScan,
+}
+
+impl Primitive {
+    pub const ALL: [Primitive; 6] = [
+        Primitive::Map,
+        Primitive::Gather,
+        Primitive::Scatter,
+        Primitive::Reduce,
+        Primitive::Scan,
+        Primitive::ExclusiveScan,
+    ];
+
+    /// The name as written in a pipeline.
+    pub fn name(self) -> &'static str {
+        match self {
+            Primitive::Map => "map",
+            Primitive::Gather => "gather",
+            Primitive::Scatter => "scatter",
+            Primitive::Reduce => "reduce",
+            Primitive::Scan => "scan",
+            Primitive::ExclusiveScan => "exclusiveScan",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Primitive> {
+        Primitive::ALL.into_iter().find(|p| p.name() == name)
+    }
+}
+
+impl std::fmt::Display for Primitive {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The built-in callees that take no functor and make or measure arrays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Generator {
+    /// `iota(n)`: `0, 1, …, n-1`.
+    Iota,
+    /// `fill(n, value)`.
+    Fill,
+    /// `len(a)`: a host scalar.
+    Len,
+}
+
+impl Generator {
+    pub const ALL: [Generator; 3] = [Generator::Iota, Generator::Fill, Generator::Len];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Generator::Iota => "iota",
+            Generator::Fill => "fill",
+            Generator::Len => "len",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Generator> {
+        Generator::ALL.into_iter().find(|g| g.name() == name)
+    }
+}
+
 /// Where a plain `scatter` writes.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub enum ScatterTarget {
@@ -180,33 +251,41 @@ macro_rules! op_host_exprs {
 }
 
 impl Op {
-    /// The primitive's name as written (`map`, `gather`, `scatter`, …).
-    pub fn primitive(&self) -> &'static str {
-        match self.kind {
-            OpKind::Field { .. } => "field",
-            OpKind::Iota { .. } => "iota",
-            OpKind::Fill { .. } => "fill",
-            OpKind::Map => "map",
-            OpKind::Gather | OpKind::GroupGather { .. } => "gather",
-            OpKind::Expand { .. } | OpKind::Scatter { .. } => "scatter",
-            OpKind::Reduce { .. } => "reduce",
-            OpKind::Scan {
-                exclusive: false, ..
-            } => "scan",
-            OpKind::Scan {
-                exclusive: true, ..
-            } => "exclusiveScan",
-        }
+    /// The primitive the op applies; `None` for a field view, `iota` and `fill`.
+    pub fn primitive(&self) -> Option<Primitive> {
+        self.callee().ok()
     }
 
-    /// `map<intersect>`, `gather`, `iota`.
+    /// The primitive the op applies, or else the name of the built-in it is.
+    fn callee(&self) -> Result<Primitive, &'static str> {
+        Ok(match self.kind {
+            OpKind::Field { .. } => return Err("field"),
+            OpKind::Iota { .. } => return Err(Generator::Iota.name()),
+            OpKind::Fill { .. } => return Err(Generator::Fill.name()),
+            OpKind::Map => Primitive::Map,
+            OpKind::Gather | OpKind::GroupGather { .. } => Primitive::Gather,
+            OpKind::Expand { .. } | OpKind::Scatter { .. } => Primitive::Scatter,
+            OpKind::Reduce { .. } => Primitive::Reduce,
+            OpKind::Scan {
+                exclusive: false, ..
+            } => Primitive::Scan,
+            OpKind::Scan {
+                exclusive: true, ..
+            } => Primitive::ExclusiveScan,
+        })
+    }
+
+    /// `map<intersect>`, `gather`, `iota`, `.normal`.
     pub fn label(&self) -> String {
         if let OpKind::Field { field } = &self.kind {
             return format!(".{field}");
         }
+        let name = self
+            .callee()
+            .map_or_else(|builtin| builtin, Primitive::name);
         match &self.functor {
-            Some(f) => format!("{}<{}>", self.primitive(), f),
-            None => self.primitive().to_string(),
+            Some(f) => format!("{name}<{f}>"),
+            None => name.to_string(),
         }
     }
 
@@ -222,6 +301,24 @@ impl Op {
             }
             OpKind::Scan { segments, .. } => reads.extend(segments),
             _ => {}
+        }
+        reads
+    }
+
+    /// Whether the op combines its stage's elements into a result that is
+    /// complete only when the stage ends (scatter, reduce, scan).
+    pub fn is_sink(&self) -> bool {
+        matches!(
+            self.kind,
+            OpKind::Scatter { .. } | OpKind::Reduce { .. } | OpKind::Scan { .. }
+        )
+    }
+
+    /// Every variable the op reads: its arrays and those its host expressions name.
+    pub fn reads(&self) -> Vec<VarId> {
+        let mut reads = self.array_reads();
+        for expr in self.host_exprs() {
+            expr.visit_vars(&mut |v| reads.push(v));
         }
         reads
     }
@@ -446,20 +543,8 @@ pub fn node_reads(node: &Node) -> Vec<VarId> {
     let mut reads = Vec::new();
     let host = |e: &HostExpr, reads: &mut Vec<VarId>| e.visit_vars(&mut |v| reads.push(v));
     match node {
-        Node::Op(op) => {
-            reads.extend(op.array_reads());
-            for e in op.host_exprs() {
-                host(e, &mut reads);
-            }
-        }
-        Node::Stage(stage) => {
-            for op in &stage.ops {
-                reads.extend(op.array_reads());
-                for e in op.host_exprs() {
-                    host(e, &mut reads);
-                }
-            }
-        }
+        Node::Op(op) => reads.extend(op.reads()),
+        Node::Stage(stage) => reads.extend(stage.ops.iter().flat_map(Op::reads)),
         Node::Host { expr, .. } => host(expr, &mut reads),
         Node::Alias { src, .. } | Node::View { src, .. } => reads.push(*src),
         Node::For { start, end, .. } => {
@@ -471,4 +556,15 @@ pub fn node_reads(node: &Node) -> Vec<VarId> {
         Node::Output { var, .. } => reads.push(*var),
     }
     reads
+}
+
+/// Every variable a node writes (not those of nested bodies).
+pub fn node_writes(node: &Node) -> Vec<VarId> {
+    match node {
+        Node::Op(op) => op.outputs.clone(),
+        Node::Stage(stage) => stage.ops.iter().flat_map(|op| op.outputs.clone()).collect(),
+        Node::Host { dst, .. } | Node::Alias { dst, .. } | Node::View { dst, .. } => vec![*dst],
+        Node::For { var, .. } => vec![*var],
+        _ => Vec::new(),
+    }
 }

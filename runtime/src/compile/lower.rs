@@ -4,7 +4,7 @@
 //! wrong arity, `break` outside a loop and recursion are reported here.
 
 use super::ir::*;
-use super::resolve::{is_reserved, Program, GENERATORS, PRIMITIVES};
+use super::resolve::{is_reserved, Program};
 use crate::functor::{FunctorKind, FunctorLibrary, Signature};
 use crate::host::HostValue;
 use crate::types::HostType;
@@ -748,11 +748,8 @@ impl Lowerer<'_, '_> {
             }
         }
 
-        if let Some(functor) = call
-            .functor
-            .as_ref()
-            .filter(|_| !PRIMITIVES.contains(&callee))
-        {
+        let primitive = Primitive::from_name(callee);
+        if let Some(functor) = call.functor.as_ref().filter(|_| primitive.is_none()) {
             self.error(Diagnostic::error(
                 "dpp::functor-on-non-primitive",
                 format!("`{callee}` is not a primitive and takes no functor"),
@@ -760,8 +757,8 @@ impl Lowerer<'_, '_> {
             ));
             return Value::Error;
         }
-        if PRIMITIVES.contains(&callee) {
-            return self.lower_primitive(call, span, positional, named, out);
+        if let Some(primitive) = primitive {
+            return self.lower_primitive(primitive, call, span, positional, named, out);
         }
         // Everything else takes no named arguments.
         if let Some((name, _)) = named.first() {
@@ -772,14 +769,14 @@ impl Lowerer<'_, '_> {
             ));
             return Value::Error;
         }
-        match callee {
-            "iota" | "fill" => {
-                let expected = if callee == "iota" { 1 } else { 2 };
+        match Generator::from_name(callee) {
+            Some(generator @ (Generator::Iota | Generator::Fill)) => {
+                let expected = if generator == Generator::Iota { 1 } else { 2 };
                 if !self.check_count(callee, expected, positional.len(), span) {
                     return Value::Error;
                 }
                 let count = self.expect_host(positional[0].clone());
-                let kind = if callee == "iota" {
+                let kind = if generator == Generator::Iota {
                     OpKind::Iota { count }
                 } else {
                     OpKind::Fill {
@@ -798,7 +795,7 @@ impl Lowerer<'_, '_> {
                 }));
                 Value::Array(dst)
             }
-            "len" => {
+            Some(Generator::Len) => {
                 if !self.check_count("len", 1, positional.len(), span) {
                     return Value::Error;
                 }
@@ -807,7 +804,7 @@ impl Lowerer<'_, '_> {
                     None => Value::Error,
                 }
             }
-            _ => {
+            None => {
                 if let Some((_, function)) = HostFunction::ALL.iter().find(|(n, _)| *n == callee) {
                     let args = positional
                         .into_iter()
@@ -818,8 +815,8 @@ impl Lowerer<'_, '_> {
                 if let Some(function) = self.program.fns.get(callee).copied() {
                     return self.inline_fn(function, call, span, positional, out);
                 }
-                let mut candidates: Vec<&str> = PRIMITIVES.to_vec();
-                candidates.extend(GENERATORS);
+                let mut candidates: Vec<&str> = Primitive::ALL.map(Primitive::name).to_vec();
+                candidates.extend(Generator::ALL.map(Generator::name));
                 candidates.extend(HostFunction::ALL.iter().map(|(n, _)| *n));
                 candidates.extend(self.program.fns.keys().copied());
                 let mut diagnostic = Diagnostic::error(
@@ -1053,13 +1050,13 @@ impl Lowerer<'_, '_> {
 
     fn lower_primitive(
         &mut self,
+        primitive: Primitive,
         call: &Call,
         span: Span,
         positional: Vec<(Value, Span)>,
         named: Vec<(&Ident, &ast::Expr)>,
         out: &mut Vec<Node>,
     ) -> Value {
-        let primitive = call.callee.name.as_str();
         let functor = match &call.functor {
             Some(f) => match self.library.get(&f.name) {
                 Some(functor) => Some((f, functor.signature().clone())),
@@ -1091,10 +1088,10 @@ impl Lowerer<'_, '_> {
 
         // The primitive's own keys; every other named argument belongs to the functor.
         let primitive_keys: &[&str] = match (primitive, functor.as_ref().map(|(_, s)| s.kind)) {
-            ("gather", Some(_)) => &["group"],
-            ("scatter", Some(FunctorKind::Expand)) => &["fanout"],
-            ("scatter", _) => &["len", "into", "mask"],
-            ("scan" | "exclusiveScan", _) => &["segments"],
+            (Primitive::Gather, Some(_)) => &["group"],
+            (Primitive::Scatter, Some(FunctorKind::Expand)) => &["fanout"],
+            (Primitive::Scatter, _) => &["len", "into", "mask"],
+            (Primitive::Scan | Primitive::ExclusiveScan, _) => &["segments"],
             _ => &[],
         };
         let mut keys: HashMap<&str, &ast::Expr> = HashMap::new();
@@ -1108,15 +1105,15 @@ impl Lowerer<'_, '_> {
         }
 
         let (kind, expected_kinds, arity): (OpKind, &[&str], Option<usize>) = match primitive {
-            "map" => (OpKind::Map, &["map", "monoid"], None),
-            "gather" if functor.is_some() => {
+            Primitive::Map => (OpKind::Map, &["map", "monoid"], None),
+            Primitive::Gather if functor.is_some() => {
                 let Some(group) = self.required_key(&keys, "group", span, out) else {
                     return Value::Error;
                 };
                 (OpKind::GroupGather { group }, &["group"], Some(1))
             }
-            "gather" => (OpKind::Gather, &[], Some(2)),
-            "scatter"
+            Primitive::Gather => (OpKind::Gather, &[], Some(2)),
+            Primitive::Scatter
                 if matches!(
                     functor.as_ref().map(|(_, s)| s.kind),
                     Some(FunctorKind::Expand)
@@ -1127,7 +1124,7 @@ impl Lowerer<'_, '_> {
                 };
                 (OpKind::Expand { fanout }, &["expand"], Some(1))
             }
-            "scatter" => {
+            Primitive::Scatter => {
                 let target = match (keys.get("len"), keys.get("into")) {
                     (Some(len), None) => ScatterTarget::Len(self.lower_host(len, out)),
                     (None, Some(into)) => match self.lower_array(into, out) {
@@ -1177,7 +1174,7 @@ impl Lowerer<'_, '_> {
                     Some(2),
                 )
             }
-            "reduce" | "scan" | "exclusiveScan" => {
+            Primitive::Reduce | Primitive::Scan | Primitive::ExclusiveScan => {
                 let Some((f, signature)) = functor.as_ref() else {
                     self.error(Diagnostic::error(
                         "dpp::missing-functor",
@@ -1196,7 +1193,7 @@ impl Lowerer<'_, '_> {
                     ));
                     return Value::Error;
                 };
-                let kind = if primitive == "reduce" {
+                let kind = if primitive == Primitive::Reduce {
                     OpKind::Reduce { op }
                 } else {
                     let segments = match keys.get("segments") {
@@ -1208,13 +1205,12 @@ impl Lowerer<'_, '_> {
                     };
                     OpKind::Scan {
                         op,
-                        exclusive: primitive == "exclusiveScan",
+                        exclusive: primitive == Primitive::ExclusiveScan,
                         segments,
                     }
                 };
                 (kind, &["monoid"], Some(1))
             }
-            _ => unreachable!("PRIMITIVES is exhaustive"),
         };
 
         // The functor's kind must suit the primitive form.
@@ -1250,7 +1246,7 @@ impl Lowerer<'_, '_> {
                 );
                 return Value::Error;
             }
-        } else if primitive == "map" {
+        } else if primitive == Primitive::Map {
             self.error(Diagnostic::error(
                 "dpp::missing-functor",
                 "`map` needs a functor, like `map<add>(a, b)`",

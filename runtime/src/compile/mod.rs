@@ -3,24 +3,29 @@
 //! `load` (files and `use`s) → `resolve` (items) → `lower` (AST to ops, names,
 //! fn inlining) → `typecheck` (types and symbolic lengths) → `cse` → `fuse`
 //! (stages). Each pass reports diagnostics instead of stopping at the first.
+//! In debug builds (so in every test) `validate` checks the plan's invariants
+//! after each pass that makes or changes one.
 
 pub mod cse;
 pub mod fuse;
+pub mod host_eval;
 pub mod ir;
 pub mod load;
 pub mod lower;
 pub mod plan_text;
 pub mod resolve;
 pub mod typecheck;
+pub mod validate;
 
 use crate::functor::FunctorLibrary;
 use crate::host::{HostValue, Uniforms};
-use crate::host_eval::{eval_host, HostEnvironment};
 use crate::types::HostType;
 use dpp_dsl::{did_you_mean, Diagnostic, SourceMap, Span};
+use host_eval::{eval_host, HostEnvironment};
 use ir::{Node, ParamInfo, Plan, VarId, VarType};
 use std::collections::HashMap;
 use std::path::Path;
+use validate::PlanPhase;
 
 #[derive(Clone, Debug)]
 pub struct CompileOptions {
@@ -108,7 +113,17 @@ fn compile(
     let Some(program) = resolve::resolve_program(&loaded, &records, &mut diagnostics) else {
         return fail(sources, diagnostics);
     };
+    let pipeline_span = program.pipeline.span;
     let mut lowered = lower::lower_program(&program, library, &mut diagnostics);
+    if diagnostics.is_empty() {
+        diagnostics.extend(validated(
+            "lower",
+            &lowered.vars,
+            &lowered.body,
+            PlanPhase::Lowered,
+            pipeline_span,
+        ));
+    }
     typecheck::typecheck(&mut lowered.vars, &lowered.body, library, &mut diagnostics);
     let params = evaluate_params(&lowered, &options.overrides, &mut sources, &mut diagnostics);
     // A fn inlined at several calls reports each of its errors once.
@@ -133,8 +148,34 @@ fn compile(
             }
         }
     }
+    let mut internal: Vec<Diagnostic> = validated(
+        "typecheck",
+        &lowered.vars,
+        &body,
+        PlanPhase::Typed,
+        pipeline_span,
+    )
+    .into_iter()
+    .collect();
     cse::eliminate_common_subexpressions(&mut body, &mut lowered.vars);
+    internal.extend(validated(
+        "cse",
+        &lowered.vars,
+        &body,
+        PlanPhase::Typed,
+        pipeline_span,
+    ));
     let body = fuse::form_stages(body, &lowered.vars, options.fuse);
+    internal.extend(validated(
+        "fuse",
+        &lowered.vars,
+        &body,
+        PlanPhase::Fused,
+        pipeline_span,
+    ));
+    if !internal.is_empty() {
+        return fail(sources, internal);
+    }
     Ok(Plan {
         pipeline: program.pipeline.name.name.clone(),
         fused: options.fuse,
@@ -142,6 +183,29 @@ fn compile(
         vars: lowered.vars,
         body,
         outputs: lowered.outputs,
+    })
+}
+
+/// In debug builds, the plan validator's findings after `pass` as one
+/// internal-error diagnostic at the pipeline (a compiler bug, not the user's).
+fn validated(
+    pass: &str,
+    vars: &[ir::VarInfo],
+    body: &[Node],
+    phase: PlanPhase,
+    span: Span,
+) -> Option<Diagnostic> {
+    if !cfg!(debug_assertions) {
+        return None;
+    }
+    let problems = validate::validate_plan(vars, body, phase);
+    (!problems.is_empty()).then(|| {
+        Diagnostic::error(
+            "dpp::internal",
+            format!("internal error: the plan is invalid after pass `{pass}`"),
+            span,
+        )
+        .with_help(problems.join("\n"))
     })
 }
 

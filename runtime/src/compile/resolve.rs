@@ -2,27 +2,15 @@
 //! entry file's pipeline, every `param` and every `fn`. Duplicates and a
 //! missing pipeline are diagnostics.
 
+use super::ir::{Generator, Primitive};
 use super::load::LoadedProgram;
 use dpp_dsl::ast::{FnItem, Item, ParamItem, PipelineItem};
 use dpp_dsl::{Diagnostic, Span};
 use std::collections::HashMap;
 
-/// The primitives, which take a functor in angle brackets.
-pub const PRIMITIVES: &[&str] = &[
-    "map",
-    "gather",
-    "scatter",
-    "reduce",
-    "scan",
-    "exclusiveScan",
-];
-
-/// The language's callees that take no functor.
-pub const GENERATORS: &[&str] = &["iota", "fill", "len"];
-
 /// Whether a `fn`, `param` or binding may not take `name`.
 pub fn is_reserved(name: &str) -> bool {
-    PRIMITIVES.contains(&name) || GENERATORS.contains(&name)
+    Primitive::from_name(name).is_some() || Generator::from_name(name).is_some()
 }
 
 pub struct Program<'a> {

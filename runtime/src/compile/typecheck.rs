@@ -30,17 +30,6 @@ pub fn typecheck(
     checker.check_nodes(body);
 }
 
-/// Every variable a node writes (not those of nested bodies).
-pub fn node_writes(node: &Node) -> Vec<VarId> {
-    match node {
-        Node::Op(op) => op.outputs.clone(),
-        Node::Stage(stage) => stage.ops.iter().flat_map(|op| op.outputs.clone()).collect(),
-        Node::Host { dst, .. } | Node::Alias { dst, .. } | Node::View { dst, .. } => vec![*dst],
-        Node::For { var, .. } => vec![*var],
-        _ => Vec::new(),
-    }
-}
-
 struct Checker<'a> {
     vars: &'a mut [VarInfo],
     library: &'a FunctorLibrary,

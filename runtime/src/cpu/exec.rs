@@ -13,7 +13,7 @@ use crate::elem::Element;
 use crate::functor::{CallContext, FunctorLibrary};
 use crate::host::Uniforms;
 use crate::interpret::{
-    elementwise_materialised, error, interpret, is_sink, Backend, OpHostValues, Slots, StageCall,
+    elementwise_materialised, error, interpret, Backend, OpHostValues, Slots, StageCall,
     StageMeasurement,
 };
 use crate::types::ElemType;
@@ -216,7 +216,7 @@ impl StageRun<'_, '_> {
             .ops
             .iter()
             .zip(host_values)
-            .filter(|(op, _)| is_sink(op));
+            .filter(|(op, _)| op.is_sink());
         for (number, (op, sink_values)) in sinks.enumerate() {
             match direct.targets[number].take() {
                 Some((group, target)) => self.finish_direct_scatter(
@@ -278,7 +278,7 @@ impl StageRun<'_, '_> {
             .ops
             .iter()
             .zip(host_values)
-            .filter(|(op, _)| is_sink(op));
+            .filter(|(op, _)| op.is_sink());
         for (op, values) in sinks {
             let OpKind::Scatter {
                 mask,

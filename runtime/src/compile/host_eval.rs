@@ -1,7 +1,7 @@
 //! Evaluation of host scalar expressions, shared by the compiler (params) and
 //! the backends (loop bounds, lengths, named arguments).
 
-use crate::compile::ir::{HostExpr, HostFunction, VarId};
+use super::ir::{HostExpr, HostFunction, VarId};
 use crate::host::{HostValue, Uniforms};
 use dpp_dsl::ast::{BinaryOp, UnaryOp};
 

@@ -1,0 +1,238 @@
+//! The plan validator: the invariants every pass must leave behind, checked
+//! after each pass in debug builds (and so in every test), as rustc validates
+//! MIR between passes. A violation is a compiler bug, reported as an internal
+//! error naming the pass, never as a user's mistake and never as a panic.
+//!
+//! What the plan's types cannot say and this checks:
+//! - every variable is written before it is read, on every path (a loop's body
+//!   may run no time; a branch's definitions count after it only when both
+//!   sides make them), and every variable id is in range;
+//! - each op has the inputs, outputs and functor its kind takes;
+//! - `break` only inside a loop;
+//! - after type checking, every variable a node touches has a type;
+//! - before fusion there are only ops, after it only stages: none empty, a
+//!   stage of several ops has a known index space, what it materialises is
+//!   made by its ops, and no op of a stage reads through an index, or at all,
+//!   a result that a sink of the same stage completes only at its end.
+
+use super::ir::*;
+use std::collections::HashSet;
+
+/// How far compilation has come: which invariants hold.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlanPhase {
+    /// Out of `lower`: ops, types not yet inferred.
+    Lowered,
+    /// Out of `typecheck` or `cse`: ops, every variable typed.
+    Typed,
+    /// Out of `fuse`: stages, no bare ops.
+    Fused,
+}
+
+/// Every invariant of `phase` that `body` breaks, as messages (empty: valid).
+pub fn validate_plan(vars: &[VarInfo], body: &[Node], phase: PlanPhase) -> Vec<String> {
+    let mut validator = Validator {
+        vars,
+        phase,
+        problems: Vec::new(),
+    };
+    let mut defined = HashSet::new();
+    validator.block(body, &mut defined, 0);
+    validator.problems
+}
+
+struct Validator<'a> {
+    vars: &'a [VarInfo],
+    phase: PlanPhase,
+    problems: Vec<String>,
+}
+
+impl Validator<'_> {
+    fn name(&self, var: VarId) -> String {
+        match self.vars.get(var.0 as usize) {
+            Some(info) => format!("`{}` (%{})", info.name, var.0),
+            None => format!("%{}", var.0),
+        }
+    }
+
+    fn problem(&mut self, message: String) {
+        self.problems.push(message);
+    }
+
+    fn block(&mut self, nodes: &[Node], defined: &mut HashSet<VarId>, loop_depth: usize) {
+        for node in nodes {
+            self.node(node, defined, loop_depth);
+        }
+    }
+
+    fn node(&mut self, node: &Node, defined: &mut HashSet<VarId>, loop_depth: usize) {
+        let what = node_name(node);
+        // A stage's ops read what earlier ops of the stage make: checked op by op.
+        if !matches!(node, Node::Stage(_)) {
+            self.check_reads(what, &node_reads(node), defined);
+        }
+        for var in node_writes(node) {
+            self.check_var(var, what);
+        }
+        match node {
+            Node::Op(op) => {
+                if self.phase == PlanPhase::Fused {
+                    self.problem(format!("{} is outside a stage after fusion", op.label()));
+                }
+                self.op(op);
+            }
+            Node::Stage(stage) => {
+                if self.phase != PlanPhase::Fused {
+                    self.problem(format!("stage `{}` before fusion", stage.label()));
+                }
+                self.stage(stage, defined);
+            }
+            Node::For { var, body, .. } => {
+                let mut inside = defined.clone();
+                inside.insert(*var);
+                self.block(body, &mut inside, loop_depth + 1);
+            }
+            Node::While { body, .. } => {
+                self.block(body, &mut defined.clone(), loop_depth + 1);
+            }
+            Node::If {
+                then_body,
+                else_body,
+                ..
+            } => {
+                let mut then_defined = defined.clone();
+                self.block(then_body, &mut then_defined, loop_depth);
+                let mut else_defined = defined.clone();
+                self.block(else_body, &mut else_defined, loop_depth);
+                defined.extend(then_defined.intersection(&else_defined));
+            }
+            Node::Break if loop_depth == 0 => self.problem("`break` outside a loop".into()),
+            _ => {}
+        }
+        defined.extend(node_writes(node));
+    }
+
+    fn check_reads(&mut self, what: &str, reads: &[VarId], defined: &HashSet<VarId>) {
+        for &var in reads {
+            self.check_var(var, what);
+            if !defined.contains(&var) {
+                let name = self.name(var);
+                self.problem(format!("{what} reads {name} before it is written"));
+            }
+        }
+    }
+
+    /// `var` exists, and has a type once types are inferred.
+    fn check_var(&mut self, var: VarId, what: &str) {
+        match self.vars.get(var.0 as usize) {
+            None => self.problem(format!(
+                "{what} names %{} but the plan has {} variables",
+                var.0,
+                self.vars.len()
+            )),
+            Some(info) if self.phase != PlanPhase::Lowered && info.ty == VarType::Unknown => {
+                let name = self.name(var);
+                self.problem(format!("{what} touches {name}, which has no type"));
+            }
+            Some(_) => {}
+        }
+    }
+
+    /// The inputs, outputs and functor each kind of op takes.
+    fn op(&mut self, op: &Op) {
+        let (inputs, functor) = match &op.kind {
+            OpKind::Iota { .. } | OpKind::Fill { .. } => (Some(0), Some(false)),
+            OpKind::Field { .. } => (Some(1), Some(false)),
+            OpKind::Map => (None, Some(true)),
+            OpKind::Gather => (Some(2), Some(false)),
+            OpKind::GroupGather { .. } | OpKind::Expand { .. } => (Some(1), Some(true)),
+            OpKind::Scatter { combine, .. } => (Some(2), Some(combine.is_some())),
+            OpKind::Reduce { .. } | OpKind::Scan { .. } => (Some(1), Some(true)),
+        };
+        let label = op.label();
+        if let Some(expected) = inputs.filter(|&n| n != op.inputs.len()) {
+            self.problem(format!(
+                "{label} has {} inputs, its kind takes {expected}",
+                op.inputs.len()
+            ));
+        }
+        if functor.is_some_and(|needed| needed != op.functor.is_some()) {
+            self.problem(format!(
+                "{label} {} a functor, against its kind",
+                if op.functor.is_some() { "has" } else { "lacks" }
+            ));
+        }
+        let outputs_ok = match op.kind {
+            OpKind::Map => !op.outputs.is_empty(),
+            _ => op.outputs.len() == 1,
+        };
+        if !outputs_ok {
+            self.problem(format!("{label} has {} outputs", op.outputs.len()));
+        }
+    }
+
+    fn stage(&mut self, stage: &Stage, defined: &HashSet<VarId>) {
+        let label = stage.label();
+        if stage.ops.is_empty() {
+            self.problem("an empty stage".into());
+            return;
+        }
+        if stage.ops.len() > 1 && stage.index_space.is_none() {
+            self.problem(format!(
+                "stage `{label}` fuses ops without a known index space"
+            ));
+        }
+        let mut made: HashSet<VarId> = HashSet::new();
+        let mut completed_at_end: HashSet<VarId> = HashSet::new();
+        let mut defined_inside = defined.clone();
+        for op in &stage.ops {
+            self.op(op);
+            self.check_reads(&op.label(), &op.reads(), &defined_inside);
+            defined_inside.extend(&op.outputs);
+            for var in op.array_reads() {
+                if completed_at_end.contains(&var) {
+                    let name = self.name(var);
+                    self.problem(format!(
+                        "{} in stage `{label}` reads {name}, which a sink of the same stage completes only at its end",
+                        op.label()
+                    ));
+                }
+            }
+            made.extend(&op.outputs);
+            if op.is_sink() {
+                completed_at_end.extend(&op.outputs);
+            }
+        }
+        for &var in &stage.materialises {
+            if !made.contains(&var) {
+                let name = self.name(var);
+                self.problem(format!(
+                    "stage `{label}` materialises {name}, which none of its ops makes"
+                ));
+            }
+        }
+        for &var in &stage.reads_indexed {
+            if made.contains(&var) && !defined.contains(&var) {
+                let name = self.name(var);
+                self.problem(format!(
+                    "stage `{label}` reads {name} through an index in the stage that makes it"
+                ));
+            }
+        }
+    }
+}
+
+fn node_name(node: &Node) -> &'static str {
+    match node {
+        Node::Op(_) => "an op",
+        Node::Stage(_) => "a stage",
+        Node::Host { .. } => "a host binding",
+        Node::View { .. } => "a view",
+        Node::Alias { .. } => "an alias",
+        Node::For { .. } => "a `for` loop",
+        Node::While { .. } => "a `while` loop",
+        Node::If { .. } => "an `if`",
+        Node::Break => "`break`",
+        Node::Output { .. } => "an `out`",
+    }
+}
