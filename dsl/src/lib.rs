@@ -8,7 +8,7 @@ mod render;
 pub mod source;
 mod suggest;
 
-pub use diagnostic::{Diagnostic, Label};
+pub use diagnostic::{Code, Diagnostic, Label};
 pub use parser::parse_module;
 pub use render::{location, render};
 pub use source::{FileId, SourceFile, SourceMap, Span};

@@ -13,7 +13,7 @@ use crate::ast::{
     Arg, BinaryOp, Block, Call, Expr, ExprKind, FnItem, Ident, Item, Module, ParamItem,
     PipelineItem, Stmt, StmtKind, UnaryOp, UseItem,
 };
-use crate::diagnostic::Diagnostic;
+use crate::diagnostic::{Code, Diagnostic};
 use crate::source::{FileId, Span};
 use crate::suggest::did_you_mean;
 
@@ -26,9 +26,9 @@ struct DppGrammar;
 /// unbounded depth would exhaust the stack while parsing or dropping the AST.
 const MAX_NESTING: usize = 200;
 
-const SYNTAX: &str = "dpp::syntax";
-const LITERAL: &str = "dpp::literal";
-const NESTING: &str = "dpp::nesting";
+const SYNTAX: Code = Code::Syntax;
+const LITERAL: Code = Code::Literal;
+const NESTING: Code = Code::Nesting;
 
 const ITEM_KEYWORDS: [&str; 4] = ["use", "param", "fn", "pipeline"];
 const KEYWORDS: [&str; 14] = [

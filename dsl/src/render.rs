@@ -131,7 +131,7 @@ impl<'s> Report<'s> {
             .into_iter()
             .map(|label| Report {
                 message: label.message.clone(),
-                code: diagnostic.code,
+                code: diagnostic.code.as_str(),
                 help: None,
                 severity: Severity::Advice,
                 source: named_source(label.span, sources),
@@ -143,7 +143,7 @@ impl<'s> Report<'s> {
             .collect();
         Report {
             message: diagnostic.message.clone(),
-            code: diagnostic.code,
+            code: diagnostic.code.as_str(),
             help: diagnostic.help.clone(),
             severity: Severity::Error,
             source: diagnostic

@@ -170,7 +170,7 @@ proptest! {
 // ---- inputs that would exhaust the stack if depth were unbounded ----------------
 
 fn codes(text: &str) -> Vec<&'static str> {
-    check(text).iter().map(|d| d.code).collect()
+    check(text).iter().map(|d| d.code.as_str()).collect()
 }
 
 #[test]

@@ -97,7 +97,7 @@ fn labels_in_several_files() {
     let call = Span::new(main, call_start, main_source.find(")\n}").unwrap() + 1);
     let params = Span::new(prelude, 15, 21);
     let diagnostic = Diagnostic::error(
-        "dpp::arity",
+        dpp_dsl::Code::Arity,
         "`compactIndex` takes 1 argument but 2 were given",
         call,
     )
@@ -105,7 +105,7 @@ fn labels_in_several_files() {
     .with_label(params, "defined with 1 parameter here")
     .with_help("remove the extra argument");
     let no_label = Diagnostic {
-        code: "dpp::no-pipeline",
+        code: dpp_dsl::Code::NoPipeline,
         message: "no `pipeline` in the file".into(),
         labels: Vec::new(),
         help: None,

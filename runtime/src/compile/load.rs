@@ -2,7 +2,7 @@
 //! Each file is parsed once; a cycle of `use`s is a diagnostic.
 
 use dpp_dsl::ast::{Item, Module};
-use dpp_dsl::{Diagnostic, FileId, SourceMap};
+use dpp_dsl::{Code, Diagnostic, FileId, SourceMap};
 use std::path::{Path, PathBuf};
 
 /// The modules of a program, entry first, each file once.
@@ -25,7 +25,7 @@ pub fn load_program(
                 let file = sources.add("<command line>", entry.display().to_string());
                 let span = dpp_dsl::Span::new(file, 0, entry.display().to_string().len());
                 diagnostics.push(Diagnostic::error(
-                    "dpp::io",
+                    Code::Io,
                     format!("cannot read `{}`: {error}", entry.display()),
                     span,
                 ));
@@ -78,7 +78,7 @@ impl Loader<'_> {
                     .collect();
                 self.diagnostics.push(
                     Diagnostic::error(
-                        "dpp::use-cycle",
+                        Code::UseCycle,
                         format!("`use` cycle: {}", cycle.join(" → ")),
                         use_item.path_span,
                     )
@@ -100,7 +100,7 @@ impl Loader<'_> {
                 }
                 Err(error) => self.diagnostics.push(
                     Diagnostic::error(
-                        "dpp::use-missing",
+                        Code::UseMissing,
                         format!("cannot read `{}`: {error}", target.display()),
                         use_item.path_span,
                     )

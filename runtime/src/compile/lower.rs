@@ -9,7 +9,7 @@ use crate::functor::{FunctorKind, FunctorLibrary, Signature};
 use crate::host::HostValue;
 use crate::types::HostType;
 use dpp_dsl::ast::{self, Block, Call, ExprKind, Ident, StmtKind};
-use dpp_dsl::{did_you_mean, Diagnostic, Span};
+use dpp_dsl::{did_you_mean, Code, Diagnostic, Span};
 use std::collections::{HashMap, HashSet};
 
 pub struct Lowered {
@@ -205,7 +205,7 @@ impl Lowerer<'_, '_> {
                 } else {
                     "`return` must be at the top level of a fn, not inside a loop or branch"
                 };
-                self.error(Diagnostic::error("dpp::return", message, stmt.span));
+                self.error(Diagnostic::error(Code::Return, message, stmt.span));
                 continue;
             }
             self.lower_stmt(stmt, out);
@@ -282,7 +282,7 @@ impl Lowerer<'_, '_> {
                 if !hoisted.is_empty() {
                     self.error(
                         Diagnostic::error(
-                            "dpp::while-condition",
+                            Code::WhileCondition,
                             "a `while` condition must be a host expression without primitives",
                             stmt.span,
                         )
@@ -321,7 +321,7 @@ impl Lowerer<'_, '_> {
                     out.push(Node::Break);
                 } else {
                     self.error(Diagnostic::error(
-                        "dpp::break-outside-loop",
+                        Code::BreakOutsideLoop,
                         "`break` outside a loop",
                         stmt.span,
                     ));
@@ -342,7 +342,7 @@ impl Lowerer<'_, '_> {
                 if vars.len() != targets.len() {
                     let span = targets[0].span.to(targets[targets.len() - 1].span);
                     self.error(Diagnostic::error(
-                        "dpp::arity",
+                        Code::Arity,
                         format!("{} names bound to {} values", targets.len(), vars.len()),
                         span,
                     ));
@@ -352,7 +352,7 @@ impl Lowerer<'_, '_> {
             }
             Value::Tuple(vars) => {
                 self.error(Diagnostic::error(
-                    "dpp::arity",
+                    Code::Arity,
                     format!(
                         "this expression has {} outputs; bind them with `(a, b) = …`",
                         vars.len()
@@ -366,7 +366,7 @@ impl Lowerer<'_, '_> {
             _ => {
                 let span = targets[0].span.to(targets[targets.len() - 1].span);
                 self.error(Diagnostic::error(
-                    "dpp::arity",
+                    Code::Arity,
                     format!("{} names bound to one value", targets.len()),
                     span,
                 ));
@@ -401,7 +401,7 @@ impl Lowerer<'_, '_> {
     ) {
         if is_reserved(&target.name) || self.library.uniforms.records.contains_key(&target.name) {
             self.error(Diagnostic::error(
-                "dpp::reserved",
+                Code::Reserved,
                 format!(
                     "`{}` is a name of the language and cannot be rebound",
                     target.name
@@ -423,7 +423,7 @@ impl Lowerer<'_, '_> {
             if is_param {
                 self.error(
                     Diagnostic::error(
-                        "dpp::param-rebind",
+                        Code::ParamRebind,
                         format!("`{}` is a param and cannot be rebound", target.name),
                         target.span,
                     )
@@ -497,7 +497,7 @@ impl Lowerer<'_, '_> {
 
     fn kind_change(&mut self, target: &Ident, was: &str, now: &str) {
         self.error(Diagnostic::error(
-            "dpp::type-mismatch",
+            Code::TypeMismatch,
             format!(
                 "`{}` is {was} outside this block; it cannot become {now} here",
                 target.name
@@ -509,7 +509,7 @@ impl Lowerer<'_, '_> {
     fn unknown_name(&mut self, name: &Ident) {
         let candidates = self.visible_names();
         let mut diagnostic = Diagnostic::error(
-            "dpp::unknown-name",
+            Code::UnknownName,
             format!("unknown name `{}`", name.name),
             name.span,
         );
@@ -532,7 +532,7 @@ impl Lowerer<'_, '_> {
             Value::Array(_) | Value::Tuple(_) => {
                 self.error(
                     Diagnostic::error(
-                        "dpp::expected-scalar",
+                        Code::ExpectedScalar,
                         "expected a host scalar, found an array",
                         expr.span,
                     )
@@ -550,7 +550,7 @@ impl Lowerer<'_, '_> {
             Value::Host(_) => {
                 self.error(
                     Diagnostic::error(
-                        "dpp::expected-array",
+                        Code::ExpectedArray,
                         "expected an array, found a host scalar",
                         expr.span,
                     )
@@ -560,7 +560,7 @@ impl Lowerer<'_, '_> {
             }
             Value::Tuple(vars) => {
                 self.error(Diagnostic::error(
-                    "dpp::arity",
+                    Code::Arity,
                     format!(
                         "expected one array, found {} (a multi-output map)",
                         vars.len()
@@ -585,7 +585,7 @@ impl Lowerer<'_, '_> {
                     None => {
                         if self.library.uniforms.records.contains_key(&name.name) {
                             self.error(Diagnostic::error(
-                            "dpp::uniform",
+                            Code::Uniform,
                             format!("`{}` is a uniform record; read one of its fields, like `{}.{}`", name.name, name.name,
                                 self.library.uniforms.records[&name.name].keys().next().map_or("field", String::as_str)),
                             name.span,
@@ -624,7 +624,7 @@ impl Lowerer<'_, '_> {
                         };
                         self.error(
                             Diagnostic::error(
-                                "dpp::array-arithmetic",
+                                Code::ArrayArithmetic,
                                 format!("`{}` combines host scalars, not arrays", op.symbol()),
                                 expr.span,
                             )
@@ -657,7 +657,7 @@ impl Lowerer<'_, '_> {
                         });
                     }
                     let mut diagnostic = Diagnostic::error(
-                        "dpp::unknown-field",
+                        Code::UnknownField,
                         format!("`{}` has no field `{}`", record.name, field.name),
                         field.span,
                     );
@@ -689,7 +689,7 @@ impl Lowerer<'_, '_> {
             Value::Error => Value::Error,
             _ => {
                 self.error(Diagnostic::error(
-                    "dpp::unknown-field",
+                    Code::UnknownField,
                     format!("host scalars have no fields (`.{}`)", field.name),
                     field.span,
                 ));
@@ -713,7 +713,7 @@ impl Lowerer<'_, '_> {
         } else if call.args.is_none() {
             self.error(
                 Diagnostic::error(
-                    "dpp::syntax",
+                    Code::Syntax,
                     format!("`{callee}` needs arguments in parentheses"),
                     span,
                 )
@@ -727,7 +727,7 @@ impl Lowerer<'_, '_> {
                 Some(name) => {
                     if named.iter().any(|(n, _)| n.name == name.name) {
                         self.error(Diagnostic::error(
-                            "dpp::duplicate",
+                            Code::Duplicate,
                             format!("argument `{}` given twice", name.name),
                             name.span,
                         ));
@@ -737,7 +737,7 @@ impl Lowerer<'_, '_> {
                 None => {
                     if !named.is_empty() {
                         self.error(Diagnostic::error(
-                            "dpp::syntax",
+                            Code::Syntax,
                             "positional arguments come before named ones",
                             arg.value.span,
                         ));
@@ -751,7 +751,7 @@ impl Lowerer<'_, '_> {
         let primitive = Primitive::from_name(callee);
         if let Some(functor) = call.functor.as_ref().filter(|_| primitive.is_none()) {
             self.error(Diagnostic::error(
-                "dpp::functor-on-non-primitive",
+                Code::FunctorOnNonPrimitive,
                 format!("`{callee}` is not a primitive and takes no functor"),
                 functor.span,
             ));
@@ -763,7 +763,7 @@ impl Lowerer<'_, '_> {
         // Everything else takes no named arguments.
         if let Some((name, _)) = named.first() {
             self.error(Diagnostic::error(
-                "dpp::unknown-argument",
+                Code::UnknownArgument,
                 format!("`{callee}` takes no named arguments"),
                 name.span,
             ));
@@ -820,7 +820,7 @@ impl Lowerer<'_, '_> {
                 candidates.extend(HostFunction::ALL.iter().map(|(n, _)| *n));
                 candidates.extend(self.program.fns.keys().copied());
                 let mut diagnostic = Diagnostic::error(
-                    "dpp::unknown-name",
+                    Code::UnknownName,
                     format!("unknown function `{callee}`"),
                     call.callee.span,
                 );
@@ -887,7 +887,7 @@ impl Lowerer<'_, '_> {
             return true;
         }
         self.error(Diagnostic::error(
-            "dpp::arity",
+            Code::Arity,
             format!(
                 "`{what}` takes {expected} argument{}, found {found}",
                 if expected == 1 { "" } else { "s" }
@@ -903,7 +903,7 @@ impl Lowerer<'_, '_> {
             Value::Error => self.error_host(span),
             _ => {
                 self.error(Diagnostic::error(
-                    "dpp::expected-scalar",
+                    Code::ExpectedScalar,
                     "expected a host scalar, found an array",
                     span,
                 ));
@@ -918,7 +918,7 @@ impl Lowerer<'_, '_> {
             Value::Error => None,
             Value::Host(_) => {
                 self.error(Diagnostic::error(
-                    "dpp::expected-array",
+                    Code::ExpectedArray,
                     "expected an array, found a host scalar",
                     span,
                 ));
@@ -926,7 +926,7 @@ impl Lowerer<'_, '_> {
             }
             Value::Tuple(v) => {
                 self.error(Diagnostic::error(
-                    "dpp::arity",
+                    Code::Arity,
                     format!("expected one array, found {}", v.len()),
                     span,
                 ));
@@ -947,7 +947,7 @@ impl Lowerer<'_, '_> {
         if self.fn_stack.contains(&name) {
             self.error(
                 Diagnostic::error(
-                    "dpp::recursion",
+                    Code::Recursion,
                     format!("`{name}` calls itself; fns are inlined and cannot recurse"),
                     call.callee.span,
                 )
@@ -958,7 +958,7 @@ impl Lowerer<'_, '_> {
         if positional.len() != function.params.len() {
             self.error(
                 Diagnostic::error(
-                    "dpp::arity",
+                    Code::Arity,
                     format!(
                         "`{name}` takes {} argument{}, found {}",
                         function.params.len(),
@@ -1003,7 +1003,7 @@ impl Lowerer<'_, '_> {
                 Value::Error => return Value::Error,
                 Value::Tuple(_) => {
                     self.error(Diagnostic::error(
-                        "dpp::arity",
+                        Code::Arity,
                         "a multi-output value cannot be a fn argument",
                         arg_span,
                     ));
@@ -1024,7 +1024,7 @@ impl Lowerer<'_, '_> {
                 for stmt in &stmts[..stmts.len() - 1] {
                     if let StmtKind::Return(_) = stmt.kind {
                         self.error(Diagnostic::error(
-                            "dpp::return",
+                            Code::Return,
                             "`return` must be the last statement of a fn",
                             stmt.span,
                         ));
@@ -1036,7 +1036,7 @@ impl Lowerer<'_, '_> {
             }
             _ => {
                 self.error(Diagnostic::error(
-                    "dpp::return",
+                    Code::Return,
                     format!("`{name}` does not end with `return`"),
                     function.name.span,
                 ));
@@ -1062,7 +1062,7 @@ impl Lowerer<'_, '_> {
                 Some(functor) => Some((f, functor.signature().clone())),
                 None => {
                     let mut diagnostic = Diagnostic::error(
-                        "dpp::unknown-functor",
+                        Code::UnknownFunctor,
                         format!("unknown functor `{}`", f.name),
                         f.span,
                     );
@@ -1133,7 +1133,7 @@ impl Lowerer<'_, '_> {
                     },
                     (Some(_), Some(_)) => {
                         self.error(Diagnostic::error(
-                            "dpp::scatter-target",
+                            Code::ScatterTarget,
                             "`scatter` takes `len:` or `into:`, not both",
                             span,
                         ));
@@ -1141,7 +1141,7 @@ impl Lowerer<'_, '_> {
                     }
                     (None, None) => {
                         self.error(Diagnostic::error(
-                            "dpp::scatter-target",
+                            Code::ScatterTarget,
                             "`scatter` needs `len: m` (a new array) or `into: dst` (a copy of dst)",
                             span,
                         ));
@@ -1150,7 +1150,7 @@ impl Lowerer<'_, '_> {
                 };
                 if functor.is_some() && !matches!(target, ScatterTarget::Into(_)) {
                     self.error(Diagnostic::error(
-                        "dpp::scatter-target",
+                        Code::ScatterTarget,
                         "a combining `scatter<f>` needs `into: dst`",
                         span,
                     ));
@@ -1177,7 +1177,7 @@ impl Lowerer<'_, '_> {
             Primitive::Reduce | Primitive::Scan | Primitive::ExclusiveScan => {
                 let Some((f, signature)) = functor.as_ref() else {
                     self.error(Diagnostic::error(
-                        "dpp::missing-functor",
+                        Code::MissingFunctor,
                         format!(
                             "`{primitive}` needs an associative functor, like `{primitive}<add>`"
                         ),
@@ -1187,7 +1187,7 @@ impl Lowerer<'_, '_> {
                 };
                 let Some(op) = monoid(signature) else {
                     self.error(Diagnostic::error(
-                        "dpp::functor-kind",
+                        Code::FunctorKind,
                         format!("`{}` is not associative; `{primitive}` takes add, mul, min, max, or, and", f.name),
                         f.span,
                     ));
@@ -1235,7 +1235,7 @@ impl Lowerer<'_, '_> {
                 };
                 self.error(
                     Diagnostic::error(
-                        "dpp::functor-kind",
+                        Code::FunctorKind,
                         format!(
                             "`{}` is a {kind_name} functor and cannot be used with `{primitive}`",
                             f.name
@@ -1248,7 +1248,7 @@ impl Lowerer<'_, '_> {
             }
         } else if primitive == Primitive::Map {
             self.error(Diagnostic::error(
-                "dpp::missing-functor",
+                Code::MissingFunctor,
                 "`map` needs a functor, like `map<add>(a, b)`",
                 call.callee.span,
             ));
@@ -1266,7 +1266,7 @@ impl Lowerer<'_, '_> {
                 None => format!("`{primitive}`"),
             };
             let mut diagnostic = Diagnostic::error(
-                "dpp::arity",
+                Code::Arity,
                 format!(
                     "{what} takes {expected_arity} array argument{}, found {}",
                     if expected_arity == 1 { "" } else { "s" },
@@ -1295,7 +1295,7 @@ impl Lowerer<'_, '_> {
                 let mut candidates: Vec<&str> = signature_named.iter().map(|p| p.name).collect();
                 candidates.extend(primitive_keys);
                 let mut diagnostic = Diagnostic::error(
-                    "dpp::unknown-argument",
+                    Code::UnknownArgument,
                     format!("unknown argument `{}`", name.name),
                     name.span,
                 );
@@ -1323,7 +1323,7 @@ impl Lowerer<'_, '_> {
                     }
                     None => {
                         self.error(Diagnostic::error(
-                            "dpp::missing-argument",
+                            Code::MissingArgument,
                             format!(
                                 "`{}` needs the argument `{}: {}`",
                                 call.functor.as_ref().map_or("", |f| f.name.as_str()),
@@ -1380,7 +1380,7 @@ impl Lowerer<'_, '_> {
             Some(expr) => Some(self.lower_host(expr, out)),
             None => {
                 self.error(Diagnostic::error(
-                    "dpp::missing-argument",
+                    Code::MissingArgument,
                     format!("this form needs `{key}: k`"),
                     span,
                 ));

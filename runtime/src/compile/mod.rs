@@ -20,7 +20,7 @@ pub mod validate;
 use crate::functor::FunctorLibrary;
 use crate::host::{HostValue, Uniforms};
 use crate::types::HostType;
-use dpp_dsl::{did_you_mean, Diagnostic, SourceMap, Span};
+use dpp_dsl::{did_you_mean, Code, Diagnostic, SourceMap, Span};
 use host_eval::{eval_host, HostEnvironment};
 use ir::{Node, ParamInfo, Plan, VarId, VarType};
 use std::collections::HashMap;
@@ -201,7 +201,7 @@ fn validated(
     let problems = validate::validate_plan(vars, body, phase);
     (!problems.is_empty()).then(|| {
         Diagnostic::error(
-            "dpp::internal",
+            Code::Internal,
             format!("internal error: the plan is invalid after pass `{pass}`"),
             span,
         )
@@ -257,7 +257,7 @@ fn evaluate_params(
             Ok(value) => value,
             Err(message) => {
                 diagnostics.push(Diagnostic::error(
-                    "dpp::param",
+                    Code::Param,
                     format!("param `{name}` must be a constant: {message}"),
                     *span,
                 ));
@@ -272,7 +272,7 @@ fn evaluate_params(
                     overridden = true;
                 }
                 Err(message) => diagnostics.push(
-                    Diagnostic::error("dpp::set", message, override_spans[name])
+                    Diagnostic::error(Code::Set, message, override_spans[name])
                         .with_label(*span, format!("`{name}` is declared here as {ty}")),
                 ),
             }
@@ -289,7 +289,7 @@ fn evaluate_params(
     for (name, _) in overrides {
         if !lowered.params.iter().any(|(n, _, _)| n == name) {
             let mut diagnostic = Diagnostic::error(
-                "dpp::set",
+                Code::Set,
                 format!("`--set {name}`: the pipeline has no param `{name}`"),
                 override_spans[name],
             );

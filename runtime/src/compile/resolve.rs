@@ -5,7 +5,7 @@
 use super::ir::{Generator, Primitive};
 use super::load::LoadedProgram;
 use dpp_dsl::ast::{FnItem, Item, ParamItem, PipelineItem};
-use dpp_dsl::{Diagnostic, Span};
+use dpp_dsl::{Code, Diagnostic, Span};
 use std::collections::HashMap;
 
 /// Whether a `fn`, `param` or binding may not take `name`.
@@ -40,7 +40,7 @@ pub fn resolve_program<'a>(
                         if let Some(first) = pipeline {
                             diagnostics.push(
                                 Diagnostic::error(
-                                    "dpp::duplicate",
+                                    Code::Duplicate,
                                     "a file holds one pipeline",
                                     p.name.span,
                                 )
@@ -63,13 +63,13 @@ pub fn resolve_program<'a>(
             };
             if is_reserved(name) || uniform_records.contains(&name) {
                 diagnostics.push(Diagnostic::error(
-                    "dpp::reserved",
+                    Code::Reserved,
                     format!("`{name}` is a name of the language and cannot be redefined"),
                     span,
                 ));
             } else if let Some(first) = defined.insert(name, span) {
                 diagnostics.push(
-                    Diagnostic::error("dpp::duplicate", format!("`{name}` is defined twice"), span)
+                    Diagnostic::error(Code::Duplicate, format!("`{name}` is defined twice"), span)
                         .with_label(first, "first defined here"),
                 );
             }
@@ -87,7 +87,7 @@ pub fn resolve_program<'a>(
             let end = entry.items.last().map_or(0, item_end);
             diagnostics.push(
                 Diagnostic::error(
-                    "dpp::no-pipeline",
+                    Code::NoPipeline,
                     "this file has no `pipeline` to run",
                     Span::new(entry.file, 0, end),
                 )

@@ -7,7 +7,7 @@ use crate::host::HostValue;
 use crate::monoid::monoid_supports;
 use crate::types::{ElemType, HostType, RecordRegistry};
 use dpp_dsl::ast::{BinaryOp, UnaryOp};
-use dpp_dsl::{did_you_mean, Diagnostic, Span};
+use dpp_dsl::{did_you_mean, Code, Diagnostic, Span};
 
 pub fn typecheck(
     vars: &mut [VarInfo],
@@ -75,7 +75,7 @@ impl Checker<'_> {
             );
             let first = info.span;
             self.diagnostics.push(
-                Diagnostic::error("dpp::type-mismatch", message, span)
+                Diagnostic::error(Code::TypeMismatch, message, span)
                     .with_label(first, "first bound here"),
             );
             return;
@@ -159,7 +159,7 @@ impl Checker<'_> {
         if let Some(found) = self.host_type(expr, span) {
             if !found.fits(expected) {
                 self.diagnostics.push(Diagnostic::error(
-                    "dpp::type-mismatch",
+                    Code::TypeMismatch,
                     format!("{what} must be {expected}, found {found}"),
                     span,
                 ));
@@ -172,7 +172,7 @@ impl Checker<'_> {
             Ok(ty) => ty,
             Err(message) => {
                 self.diagnostics
-                    .push(Diagnostic::error("dpp::type-mismatch", message, span));
+                    .push(Diagnostic::error(Code::TypeMismatch, message, span));
                 None
             }
         }
@@ -180,7 +180,7 @@ impl Checker<'_> {
 
     fn mismatch(&mut self, span: Span, message: String) {
         self.diagnostics
-            .push(Diagnostic::error("dpp::type-mismatch", message, span));
+            .push(Diagnostic::error(Code::TypeMismatch, message, span));
     }
 
     /// Lengths that fold to different constants are a compile-time error.
@@ -198,7 +198,7 @@ impl Checker<'_> {
                         self.vars[b.0 as usize].name, self.vars[a.0 as usize].name
                     );
                     self.diagnostics.push(Diagnostic::error(
-                        "dpp::length-mismatch",
+                        Code::LengthMismatch,
                         message,
                         op.span,
                     ));
@@ -257,7 +257,7 @@ impl Checker<'_> {
                     }
                     None => {
                         let mut diagnostic = Diagnostic::error(
-                            "dpp::unknown-field",
+                            Code::UnknownField,
                             format!("`{}` has no field `{field}`", record.name),
                             op.span,
                         );
@@ -458,7 +458,7 @@ impl Checker<'_> {
                     actual.name(self.records())
                 );
                 self.diagnostics.push(
-                    Diagnostic::error("dpp::type-mismatch", message, op.span).with_help(format!(
+                    Diagnostic::error(Code::TypeMismatch, message, op.span).with_help(format!(
                         "signature: {}",
                         signature.display(self.records()).trim()
                     )),
