@@ -1,6 +1,6 @@
 //! `dpp`: run, inspect and check `.dpp` pipelines.
 //!
-//! Exit status (spec §4): 0 on success, 2 on input errors (a malformed
+//! Exit status (docs/language.md §5): 0 on success, 2 on input errors (a malformed
 //! pipeline, bad arguments, an unreadable scene), 1 on run-time failures.
 
 mod bench;
@@ -118,7 +118,7 @@ struct RunArgs {
     /// Image size.
     #[arg(long, default_value = "1024x768", value_parser = parse_size)]
     size: (u32, u32),
-    /// A standard view of the scene's bounds (spec §7).
+    /// A standard view of the scene's bounds (docs/language.md §8).
     #[arg(long, default_value = "front")]
     view: String,
     /// Camera position (overrides the view's).

@@ -1,5 +1,6 @@
 //! Writing pipeline outputs: colour arrays of one element per pixel become
-//! PNGs, any array can become a `.npy` (spec §3, `out`).
+//! PNGs, any array of primitive elements can become a `.npy`
+//! (docs/language.md §4, Outputs).
 
 use crate::colorbar::Canvas;
 use dpp_runtime::cpu::exec::OutputValue;

@@ -1,6 +1,6 @@
 //! The `dpp` command as a user runs it: exit statuses (0, 1, 2), diagnostics,
 //! outputs, and WORKLOAD1's triangle ids against an independent brute-force
-//! tracer that implements the §7 camera on its own.
+//! tracer that implements the camera of docs/language.md §8 on its own.
 
 mod common;
 
@@ -47,7 +47,8 @@ fn random_mesh(seed: u64, count: usize) -> (String, Vec<[[f64; 3]; 3]>) {
     (obj, triangles)
 }
 
-/// The §7 camera and a brute-force closest hit, in f64, written apart from the tracer.
+/// The camera of docs/language.md §8 and a brute-force closest hit, in f64,
+/// written apart from the tracer.
 fn reference_prims(triangles: &[[[f64; 3]; 3]], width: usize, height: usize) -> Vec<u32> {
     let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
     let cross = |a: [f64; 3], b: [f64; 3]| {

@@ -1,5 +1,5 @@
 //! Every pipeline in `pipelines/` compiles, and its plan, fused and unfused, is
-//! pinned by a snapshot (spec §5). A change to the compiler that changes a plan
+//! pinned by a snapshot (docs/language.md §6). A change to the compiler that changes a plan
 //! shows up here as a readable diff.
 
 mod common;

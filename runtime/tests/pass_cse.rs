@@ -396,9 +396,10 @@ fn fn_calls_with_the_same_arguments_share_their_ops() {
     );
 }
 
-/// Spec §5: "Common subexpressions (the same primitive on the same inputs) are
-/// computed once." The pass works block by block: an op inside a branch does
-/// not reuse the same op computed before the branch.
+/// docs/language.md §6: an op that applies the same primitive to the same
+/// values as an earlier one is computed once. Nested blocks see what their
+/// enclosing block computed before them: an op inside a branch reuses the same
+/// op computed before the branch.
 #[test]
 fn an_op_in_a_branch_reuses_the_same_op_before_it() {
     let text = report(

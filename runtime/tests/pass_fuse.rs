@@ -1,4 +1,4 @@
-//! Pass 6, `fuse`: ops grouped into stages by the rules of spec §5.
+//! Pass 6, `fuse`: ops grouped into stages by the rules of docs/language.md §6.
 //!
 //! 1. `map → map` over the same index space share a stage; an intermediate
 //!    that nothing else reads is not materialised, one read elsewhere is.

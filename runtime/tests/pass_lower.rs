@@ -550,9 +550,10 @@ fn break_and_return_placement() {
     );
 }
 
-/// Spec §4 asks for a diagnostic for every malformed input, each reported once.
-/// Lowering checks a fn's body only where it inlines it: a fn that is never
-/// called is never checked, and one called twice reports its errors twice.
+/// docs/language.md §5 asks for a diagnostic for every malformed input, each
+/// reported once. A fn that is never called is still checked for unknown
+/// names, functors and arities, and an error in a fn called twice is reported
+/// once.
 #[test]
 fn every_fn_body_is_checked_once() {
     let text = report(

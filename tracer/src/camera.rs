@@ -1,4 +1,5 @@
-//! The pinhole camera of the language spec (§7) and the Morton order of its pixels.
+//! The pinhole camera of the language reference (docs/language.md §8) and the
+//! Morton order of its pixels.
 
 use crate::mesh::Bounds;
 use crate::vector::unit_or_zero;
@@ -37,7 +38,7 @@ pub enum CameraError {
     SceneTooLarge { min: Vec3, max: Vec3 },
 }
 
-/// The standard views of §7.
+/// The standard views of docs/language.md §8.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum StandardView {
     Front,
@@ -154,7 +155,8 @@ impl Camera {
         self.width * self.height
     }
 
-    /// The unit direction through offset `(sx, sy)` of pixel `(x, y)`, row 0 at the top (§7).
+    /// The unit direction through offset `(sx, sy)` of pixel `(x, y)`, row 0 at the
+    /// top (docs/language.md §8).
     #[inline]
     pub fn direction(&self, x: u32, y: u32, sx: f32, sy: f32) -> Vec3 {
         let horizontal = 2.0 * (x as f32 + sx) / self.width as f32 - 1.0;
@@ -166,7 +168,8 @@ impl Camera {
     }
 }
 
-/// The offset inside its pixel of sample `sample` of `samples_per_pixel` (§7):
+/// The offset inside its pixel of sample `sample` of `samples_per_pixel`
+/// (docs/language.md §8):
 /// the centre for one sample, the 2×2 grid row by row for four.
 #[inline]
 pub fn sample_offset(samples_per_pixel: u32, sample: u32) -> (f32, f32) {
@@ -289,7 +292,7 @@ mod tests {
     }
 
     fn expected_direction(camera: &Camera, x: f32, y: f32) -> Vec3 {
-        // §7, spelled out independently of the precomputed frame.
+        // docs/language.md §8, spelled out independently of the precomputed frame.
         let f = (camera.look_at - camera.eye).normalize();
         let r = f.cross(camera.up).normalize();
         let u = r.cross(f);

@@ -3,7 +3,8 @@
 //! tobj triangulates a face `v0 v1 … vn` as the fan `(v0,v1,v2), (v0,v2,v3), …`
 //! (its `export_faces`: quads become `(a,b,c),(a,c,d)`, polygons a fan) and emits
 //! one model per `o`/`g`/`usemtl` run, in file order. Concatenating the models in
-//! order therefore numbers triangles exactly as the language spec demands.
+//! order therefore numbers triangles exactly as the language reference demands
+//! (docs/language.md §8).
 //!
 //! Materials ([`load_obj_with_materials`]): each `mtllib` is read relative to the
 //! OBJ's folder. A missing MTL file is not an error (every triangle then gets the

@@ -1,4 +1,4 @@
-//! Every primitive form of spec §2, run through the whole stack (pipeline text
+//! Every primitive form of docs/language.md §3, run through the whole stack (pipeline text
 //! → plan → CPU backend) on random inputs, against plain sequential
 //! references; fused and unfused, on 1 and 2 threads, must agree bit for bit.
 

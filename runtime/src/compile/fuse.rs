@@ -1,12 +1,12 @@
-//! Pass 6: group ops into stages (spec §5). With fusion on, consecutive ops
-//! over the same index space share a stage: map → map (rule 1), a gather's
-//! indexed read moves into its consumer (rule 2), and a map runs inside the
-//! scatter, reduce or scan that consumes it (rule 3). Stages end at the
-//! barriers of rule 4. An intermediate that nothing outside its stage reads is
-//! never materialised.
+//! Pass 6: group ops into stages (docs/language.md §6). With fusion on,
+//! consecutive ops over the same index space share a stage:
+//! map → map (rule 1), a gather's indexed read moves into its consumer
+//! (rule 2), and a map runs inside the scatter, reduce or scan that consumes
+//! it (rule 3). Stages end at the barriers of rule 4. An intermediate that
+//! nothing outside its stage reads is never materialised.
 //!
-//! A scatter is not a barrier (the spec's rule 4 does not list it): ops after
-//! it go on in its stage, so one stage can end in several scatters (a tracer's
+//! A scatter is not a barrier (rule 4 does not list it): ops after it go on
+//! in its stage, so one stage can end in several scatters (a tracer's
 //! colour, depth and alpha images from one pass over the rays). Its result is
 //! complete only when the stage ends, so an op that reads it, or rewrites what
 //! it reads or writes, starts a new stage. An `out` statement does not end a
@@ -587,7 +587,7 @@ fn collect_uniforms(expr: &HostExpr, vars: &[VarInfo], out: &mut Vec<String>) {
 
 /// A group gather of groups of one (`gather<f>(a, group: 1)`, the group a
 /// literal): element `i` reads only `a[i]`, so it runs over `a`'s index space
-/// like a map and fuses like one (spec §5: it changes no length).
+/// like a map and fuses like one (docs/language.md §6: it changes no length).
 pub(crate) fn is_elementwise_group(op: &Op) -> bool {
     matches!(
         &op.kind,

@@ -1,5 +1,5 @@
 //! The generic functors the language requires beside the ray-tracing ones
-//! (spec §2): arithmetic monoids, comparisons, conversions, `select`, `hash`
+//! (docs/language.md §9): arithmetic monoids, comparisons, conversions, `select`, `hash`
 //! and `random`, group reductions and fan-out, so that pipelines other than
 //! ray tracing (a histogram, a stream compaction, a prefix sum) can be written.
 

@@ -1,7 +1,8 @@
-//! `cameraRay(index: u32) -> (ray: Ray) [spp: int = 1]`: primary rays of the §7
-//! camera. Ray `index` belongs to pixel `morton_pixels[index / spp]` (Morton order
-//! for coherence) and sample `index % spp`; its `sample` field is
-//! `row-major pixel * spp + sample`, so scattering by it writes row-major output.
+//! `cameraRay(index: u32) -> (ray: Ray) [spp: int = 1]`: primary rays of the
+//! camera of docs/language.md §8. Ray `index` belongs to pixel
+//! `morton_pixels[index / spp]` (Morton order for coherence) and sample
+//! `index % spp`; its `sample` field is `row-major pixel * spp + sample`, so
+//! scattering by it writes row-major output.
 //! Camera rays have weight 1 and depth 0.
 
 use crate::camera::{check_samples_per_pixel, sample_offset, Camera};
