@@ -13,7 +13,8 @@ use clap::{Parser, Subcommand, ValueEnum};
 use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::compile::plan_text::plan_to_text;
 use dpp_runtime::cpu::column_pool::ColumnPool;
-use dpp_runtime::cpu::exec::{listed_op_shares, run_plan, OutputValue, RunContext, StageTiming};
+use dpp_runtime::cpu::exec::{run_plan, RunContext};
+use dpp_runtime::interpret::{listed_op_shares, OutputValue, RunError, StageTiming};
 use dpp_runtime::{compile_file, CompileOptions, FunctorLibrary, Plan};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -204,6 +205,23 @@ enum Failure {
     Run(String),
 }
 
+/// A run's error decides its own exit status by its kind: bad input in the
+/// user's data is status 2 even when only the run could find it.
+impl From<RunError> for Failure {
+    fn from(error: RunError) -> Failure {
+        match error.kind.exit_status() {
+            2 => Failure::Input(format!("error: {}", error.message)),
+            _ => Failure::Run(error.message),
+        }
+    }
+}
+
+impl From<dpp_gpu::GpuError> for Failure {
+    fn from(error: dpp_gpu::GpuError) -> Failure {
+        Failure::from(RunError::from(error))
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let library = dpp_tracer::functor_library();
@@ -358,11 +376,11 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             let run_start = Instant::now();
             let result = pool
                 .install(|| run_plan(&plan, &context))
-                .map_err(|e| Failure::Run(e.to_string()))?;
+                .map_err(Failure::from)?;
             (result, run_start.elapsed())
         }
         Backend::Gpu => {
-            let gpu = GpuContext::new().map_err(|e| Failure::Run(e.to_string()))?;
+            let gpu = GpuContext::new().map_err(Failure::from)?;
             description.push_str(&format!("\nGPU: {}", gpu.adapter_name()));
             let context = GpuRunContext {
                 gpu: &gpu,
@@ -374,7 +392,7 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             let run_start = Instant::now();
             let result = pool
                 .install(|| run_plan_gpu(&plan, &context))
-                .map_err(|e| Failure::Run(e.to_string()))?;
+                .map_err(Failure::from)?;
             (result, run_start.elapsed())
         }
     };

@@ -3,7 +3,7 @@
 //! (docs/language.md §4, Outputs).
 
 use crate::colorbar::Canvas;
-use dpp_runtime::cpu::exec::OutputValue;
+use dpp_runtime::interpret::OutputValue;
 use dpp_runtime::{Column, FunctorLibrary};
 use dpp_tracer::camera::Camera;
 use std::fs::File;

@@ -4,7 +4,8 @@
 //! `--iso-pipeline` runs an edited copy instead).
 
 use dpp_runtime::cpu::column_pool::ColumnPool;
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
+use dpp_runtime::cpu::exec::{run_plan, RunContext};
+use dpp_runtime::interpret::OutputValue;
 use dpp_runtime::{compile_file, compile_text, CompileOptions, FunctorLibrary};
 use dpp_tracer::functors::isosurface::{triangles_to_mesh, volume_uniforms, VolumeResources};
 use dpp_tracer::volume::raw::RawSpec;

@@ -153,7 +153,7 @@ pub fn allocate_field(
         // A binding may not be empty: an empty array still has one word.
         let bytes = (elements as u64 * element_bytes).max(4);
         if bytes > gpu.limits.max_buffer_bytes {
-            return Err(GpuError(format!(
+            return Err(GpuError::resource_limit(format!(
                 "an array segment of {bytes} bytes is above the adapter `{}`'s max_buffer_size of {} bytes",
                 gpu.adapter_name(),
                 gpu.limits.max_buffer_bytes
@@ -222,7 +222,7 @@ pub fn copy_array(
 /// Reads every word of `field` back (waits for the device).
 pub fn download_words(gpu: &GpuContext, field: &Field) -> Result<Vec<u32>, GpuError> {
     let ElemType::U32 = field.ty else {
-        return Err(GpuError("read back as words: not a u32 field".into()));
+        return Err(GpuError::internal("read back as words: not a u32 field"));
     };
     match download_field(gpu, field)? {
         Column::U32(words) => Ok(words),
@@ -270,7 +270,7 @@ fn download_field(gpu: &GpuContext, field: &Field) -> Result<Column, GpuError> {
         let view = buffer
             .slice(..)
             .get_mapped_range()
-            .map_err(|e| GpuError(format!("reading a GPU buffer back failed: {e}")))?;
+            .map_err(|e| GpuError::device(format!("reading a GPU buffer back failed: {e}")))?;
         extend_from_words(&mut column, bytemuck::cast_slice(&view));
         drop(view);
         buffer.unmap();
@@ -286,7 +286,7 @@ pub fn wait(gpu: &GpuContext) -> Result<(), GpuError> {
             timeout: None,
         })
         .map(|_| ())
-        .map_err(|e| GpuError(format!("waiting for the GPU failed: {e}")))
+        .map_err(|e| GpuError::device(format!("waiting for the GPU failed: {e}")))
 }
 
 /// The array as a host column.

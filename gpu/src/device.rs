@@ -1,11 +1,46 @@
 //! Finding an adapter and opening a device with the adapter's own limits.
 
+use dpp_runtime::interpret::RunError;
+use dpp_runtime::ErrorKind;
 use std::fmt;
 
-/// Why the GPU backend cannot start or cannot go on.
+/// Why the GPU backend cannot start or cannot go on: a device failure, or a
+/// limit of the adapter the work does not fit.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("{0}")]
-pub struct GpuError(pub String);
+#[error("{message}")]
+pub struct GpuError {
+    pub kind: ErrorKind,
+    pub message: String,
+}
+
+impl GpuError {
+    pub fn device(message: impl Into<String>) -> GpuError {
+        GpuError {
+            kind: ErrorKind::Device,
+            message: message.into(),
+        }
+    }
+
+    pub fn resource_limit(message: impl Into<String>) -> GpuError {
+        GpuError {
+            kind: ErrorKind::ResourceLimit,
+            message: message.into(),
+        }
+    }
+
+    pub fn internal(message: impl Into<String>) -> GpuError {
+        GpuError {
+            kind: ErrorKind::Internal,
+            message: message.into(),
+        }
+    }
+}
+
+impl From<GpuError> for RunError {
+    fn from(error: GpuError) -> RunError {
+        RunError::new(error.kind, error.message)
+    }
+}
 
 /// Limits the backend plans with: the adapter's, unless a test lowers them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -54,7 +89,7 @@ impl GpuContext {
             &instance, None,
         ))
         .map_err(|e| {
-            GpuError(format!(
+            GpuError::device(format!(
                 "no GPU adapter found ({e}); on a machine without a GPU install Mesa's software Vulkan driver \
                  (Debian: mesa-vulkan-drivers libvulkan1) and set WGPU_BACKEND=vulkan"
             ))
@@ -72,7 +107,7 @@ impl GpuContext {
             required_limits: adapter_limits.clone(),
             ..Default::default()
         }))
-        .map_err(|e| GpuError(format!("adapter `{}` refused a device: {e}", info.name)))?;
+        .map_err(|e| GpuError::device(format!("adapter `{}` refused a device: {e}", info.name)))?;
         let limits = GpuLimits {
             max_binding_bytes: adapter_limits
                 .max_storage_buffer_binding_size

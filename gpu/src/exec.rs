@@ -13,7 +13,7 @@ use dpp_runtime::column::Column;
 use dpp_runtime::functor::FunctorLibrary;
 use dpp_runtime::host::{HostValue, Uniforms};
 use dpp_runtime::interpret::{
-    error, interpret_with_inputs, Backend, RunError, RunResult, Slots, StageCall, StageMeasurement,
+    interpret_with_inputs, Backend, RunError, RunResult, Slots, StageCall, StageMeasurement,
 };
 use dpp_runtime::monoid::MonoidOp;
 use dpp_runtime::types::ElemType;
@@ -191,7 +191,7 @@ impl GpuBackend<'_> {
     pub fn scene_buffer(&self, buffer: &GpuBuffer) -> Result<wgpu::Buffer, RunError> {
         let bytes = (buffer.data.len() * 4) as u64;
         if bytes > self.gpu.limits.device_max_binding_bytes {
-            return Err(error(format!(
+            return Err(RunError::resource_limit(format!(
                 "scene buffer `{}` has {bytes} bytes, above the adapter `{}`'s largest storage binding ({} bytes)",
                 buffer.name,
                 self.gpu.adapter_name(),
@@ -255,7 +255,7 @@ impl GpuBackend<'_> {
                 continue;
             }
             if dispatch.bindings.len() > gpu.limits.max_storage_buffers_per_stage as usize {
-                return Err(error(format!(
+                return Err(RunError::resource_limit(format!(
                     "a stage needs {} storage buffers, above the adapter `{}`'s max_storage_buffers_per_shader_stage of {}",
                     dispatch.bindings.len(),
                     gpu.adapter_name(),
@@ -266,7 +266,7 @@ impl GpuBackend<'_> {
             let groups_x = groups.min(max_x);
             let groups_y = groups.div_ceil(groups_x);
             if groups_y > max_x {
-                return Err(error(format!(
+                return Err(RunError::resource_limit(format!(
                     "{} invocations are more than the adapter `{}` can dispatch",
                     dispatch.threads,
                     gpu.adapter_name()
@@ -352,7 +352,7 @@ impl GpuBackend<'_> {
         if let Some((_, _, read)) = &timestamps {
             read.slice(..).map_async(wgpu::MapMode::Read, |_| {});
         }
-        wait(gpu).map_err(|e| error(e.0))?;
+        wait(gpu).map_err(RunError::from)?;
         let host_time = start.elapsed();
         let Some((_, _, read)) = &timestamps else {
             return Ok(Some(host_time));
@@ -360,7 +360,7 @@ impl GpuBackend<'_> {
         let view = read
             .slice(..)
             .get_mapped_range()
-            .map_err(|e| error(format!("reading GPU timestamps failed: {e}")))?;
+            .map_err(|e| RunError::device(format!("reading GPU timestamps failed: {e}")))?;
         let ticks: &[u64] = bytemuck::cast_slice(&view);
         let nanoseconds =
             ticks[1].saturating_sub(ticks[0]) as f64 * f64::from(gpu.queue.get_timestamp_period());
@@ -386,7 +386,7 @@ impl GpuBackend<'_> {
         }
         // Validate first so a bad twin is a clear error, not a device loss.
         crate::validate_wgsl(source).map_err(|e| {
-            error(format!(
+            RunError::internal(format!(
                 "internal error: a generated GPU kernel does not compile:\n{e}"
             ))
         })?;
@@ -435,7 +435,7 @@ impl GpuBackend<'_> {
 
     /// Fails the run if a kernel recorded a failure (waits for the device).
     fn check_status(&self) -> Result<(), RunError> {
-        let words = read_buffer_words(self.gpu, &self.status, 3).map_err(|e| error(e.0))?;
+        let words = read_buffer_words(self.gpu, &self.status, 3).map_err(RunError::from)?;
         if words[0] == 0 {
             return Ok(());
         }
@@ -444,7 +444,8 @@ impl GpuBackend<'_> {
             .get(words[0] as usize - 1)
             .cloned()
             .unwrap_or_else(|| format!("unknown GPU failure {}", words[0]));
-        Err(error(
+        // A twin raises what its CPU code returns as a functor error: the input.
+        Err(RunError::bad_input(
             message
                 .replace("{a}", &words[1].to_string())
                 .replace("{b}", &words[2].to_string()),
@@ -464,11 +465,11 @@ impl GpuBackend<'_> {
         loop {
             let blocks = level.len.div_ceil(BLOCK).max(1);
             let out = allocate_array(self.gpu, level.ty, blocks, records, &self.buffers)
-                .map_err(|e| error(e.0))?;
+                .map_err(RunError::from)?;
             let mut builder = self.builder();
-            let combine =
-                monoid::combine_function(op, level.ty, &mut builder.functions).map_err(error)?;
-            let identity = monoid::identity(op, level.ty).map_err(error)?;
+            let combine = monoid::combine_function(op, level.ty, &mut builder.functions)
+                .map_err(RunError::internal)?;
+            let identity = monoid::identity(op, level.ty).map_err(RunError::internal)?;
             let load = builder.array_loader(&level);
             let n = builder.param_u32(level.len as u32);
             let store = builder.array_store(&out, "i", "running");
@@ -497,20 +498,19 @@ impl GpuBackend<'_> {
         dispatches: &mut Vec<Dispatch>,
     ) -> Result<GpuArray, RunError> {
         let records = &self.library.records;
-        let gpu_error = |e: GpuError| error(e.0);
         let n = values.len;
-        let out =
-            allocate_array(self.gpu, values.ty, n, records, &self.buffers).map_err(gpu_error)?;
+        let out = allocate_array(self.gpu, values.ty, n, records, &self.buffers)
+            .map_err(RunError::from)?;
         if n == 0 {
             return Ok(out);
         }
         let blocks = n.div_ceil(BLOCK);
         // Pass 1: each block's (value since its last segment start, started) pair.
         let totals = allocate_array(self.gpu, values.ty, blocks, records, &self.buffers)
-            .map_err(gpu_error)?;
+            .map_err(RunError::from)?;
         let starts = allocate_array(self.gpu, ElemType::Bool, blocks, records, &self.buffers)
-            .map_err(gpu_error)?;
-        let identity = monoid::identity(op, values.ty).map_err(error)?;
+            .map_err(RunError::from)?;
+        let identity = monoid::identity(op, values.ty).map_err(RunError::internal)?;
         {
             let (mut builder, combine, load, flag) = self.scan_builder(op, values, flags)?;
             let count = builder.param_u32(n as u32);
@@ -570,8 +570,8 @@ impl GpuBackend<'_> {
         flags: Option<&GpuArray>,
     ) -> Result<(ShaderBuilder<'_>, String, String, String), RunError> {
         let mut builder = self.builder();
-        let combine =
-            monoid::combine_function(op, values.ty, &mut builder.functions).map_err(error)?;
+        let combine = monoid::combine_function(op, values.ty, &mut builder.functions)
+            .map_err(RunError::internal)?;
         let load = builder.array_loader(values);
         let flag = match flags {
             Some(f) => format!("{}(j)", builder.array_loader(f)),
@@ -693,11 +693,11 @@ impl Backend for GpuBackend<'_> {
         for (output, op, result) in reduced {
             let value = if call.len == 0 {
                 dpp_runtime::monoid::identity(op, result.ty)
-                    .map_err(|e| error(e.to_string()))?
+                    .map_err(RunError::from)?
                     .to_host()
             } else {
                 element_to_host(
-                    &download(self.gpu, &result, &self.library.records).map_err(|e| error(e.0))?,
+                    &download(self.gpu, &result, &self.library.records).map_err(RunError::from)?,
                 )
             };
             slots.set_host(output, value);
@@ -716,7 +716,7 @@ impl Backend for GpuBackend<'_> {
         self.check_status()?;
         download(self.gpu, array, &self.library.records)
             .map(Arc::new)
-            .map_err(|e| error(e.0))
+            .map_err(RunError::from)
     }
 }
 

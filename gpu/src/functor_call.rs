@@ -8,7 +8,7 @@ use dpp_runtime::column::Column;
 use dpp_runtime::compile::ir::*;
 use dpp_runtime::functor::{FunctorKind, TypePattern};
 use dpp_runtime::host::HostValue;
-use dpp_runtime::interpret::{error, OutputValue, RunError};
+use dpp_runtime::interpret::{OutputValue, RunError};
 use dpp_runtime::types::ElemType;
 
 /// `map<name>(inputs…)`, `gather<name>(inputs[0], group: k)` or
@@ -24,7 +24,7 @@ pub fn run_functor_gpu(
     let functor = context
         .library
         .get(name)
-        .ok_or_else(|| error(format!("no functor `{name}`")))?;
+        .ok_or_else(|| RunError::bad_input(format!("no functor `{name}`")))?;
     let signature = functor.signature();
     // Type variables take the type of the first input declared with them.
     let bind = |pattern: &TypePattern| -> Result<ElemType, RunError> {
@@ -38,7 +38,9 @@ pub fn run_functor_gpu(
                     p.ty == *pattern || matches!(p.ty, TypePattern::Var(m, _) if m == *n)
                 })
                 .map(|(_, column)| column.elem_type())
-                .ok_or_else(|| error(format!("`{name}`: cannot bind type variable T{n}"))),
+                .ok_or_else(|| {
+                    RunError::bad_input(format!("`{name}`: cannot bind type variable T{n}"))
+                }),
         }
     };
     let output_type = bind(&signature.outputs[0].ty)?;
@@ -62,7 +64,7 @@ pub fn run_functor_gpu(
             .get(i)
             .copied()
             .or(param.default)
-            .ok_or_else(|| error(format!("`{name}` needs `{}`", param.name)))?;
+            .ok_or_else(|| RunError::bad_input(format!("`{name}` needs `{}`", param.name)))?;
         named_args.push((param.name.to_string(), HostExpr::Const(value)));
     }
     let k = HostExpr::Const(HostValue::Int(group as i64));
@@ -113,11 +115,11 @@ pub fn run_functor_gpu(
     let uploaded = input_vars
         .iter()
         .zip(inputs)
-        .map(|(var, column)| Ok((*var, upload(context.gpu, column).map_err(|e| error(e.0))?)))
+        .map(|(var, column)| Ok((*var, upload(context.gpu, column).map_err(RunError::from)?)))
         .collect::<Result<Vec<_>, RunError>>()?;
     let result = run_plan_gpu_with_inputs(&plan, context, uploaded)?;
     match result.outputs.into_iter().next() {
         Some((_, OutputValue::Array(column))) => Ok(std::sync::Arc::unwrap_or_clone(column)),
-        _ => Err(error("the functor produced no array")),
+        _ => Err(RunError::internal("the functor produced no array")),
     }
 }

@@ -12,7 +12,7 @@ use crate::monoid;
 use crate::shader::{Access, ShaderBuilder};
 use dpp_runtime::compile::ir::*;
 use dpp_runtime::functor::FunctorKind;
-use dpp_runtime::interpret::{elementwise_materialised, error, RunError, Slots, StageCall};
+use dpp_runtime::interpret::{elementwise_materialised, RunError, Slots, StageCall};
 use dpp_runtime::types::ElemType;
 use dpp_runtime::wgsl::{collect_dependencies, elem_type_wgsl, WgslRequest};
 use std::collections::HashMap;
@@ -90,10 +90,6 @@ struct Generator<'b, 'c, 'r> {
 }
 
 impl Generator<'_, '_, '_> {
-    fn gpu_error(e: crate::GpuError) -> RunError {
-        error(e.0)
-    }
-
     fn lookup(&self, slots: &Slots<GpuArray>, var: VarId) -> Result<Value, RunError> {
         match self.locals.get(&var) {
             Some(v) => Ok(v.clone()),
@@ -130,13 +126,16 @@ impl Generator<'_, '_, '_> {
                 OpKind::Iota { .. } => self.bind(op.outputs[0], "i".into()),
                 OpKind::Fill { .. } => {
                     let value = values.fill.expect("fill value");
-                    let expression = self.builder.param_element(value).map_err(error)?;
+                    let expression = self
+                        .builder
+                        .param_element(value)
+                        .map_err(RunError::internal)?;
                     self.bind(op.outputs[0], expression);
                 }
                 OpKind::Field { field } => {
                     let source = self.lookup(slots, op.inputs[0])?;
                     let ElemType::Record(record) = call.elem_type(op.inputs[0]) else {
-                        return Err(error("field of a non-record array"));
+                        return Err(RunError::internal("field of a non-record array"));
                     };
                     let index = call
                         .records
@@ -255,14 +254,14 @@ impl Generator<'_, '_, '_> {
                             call.records,
                             &self.backend.buffers,
                         )
-                        .map_err(Self::gpu_error)?,
+                        .map_err(RunError::from)?,
                         ScatterTarget::Into(dst) => copy_array(
                             self.backend.gpu,
                             encoder,
                             slots.array(call.plan, *dst)?,
                             &self.backend.buffers,
                         )
-                        .map_err(Self::gpu_error)?,
+                        .map_err(RunError::from)?,
                     };
                     let index = self.lookup(slots, op.inputs[0])?;
                     let index = self.expression(&index);
@@ -294,7 +293,7 @@ impl Generator<'_, '_, '_> {
                                 &field,
                                 &mut self.builder.functions,
                             )
-                            .map_err(error)?;
+                            .map_err(RunError::internal)?;
                             let components: Vec<String> = match ty {
                                 ElemType::Vec2 | ElemType::Vec3 | ElemType::Vec4 => {
                                     ["x", "y", "z", "w"][..crate::array::words_of(ty)]
@@ -325,7 +324,7 @@ impl Generator<'_, '_, '_> {
                                 call.records,
                                 &self.backend.buffers,
                             )
-                            .map_err(Self::gpu_error)?;
+                            .map_err(RunError::from)?;
                             let field = self.builder.field(&winner.fields[0], Access::Atomic);
                             let update = monoid::atomic_update(
                                 dpp_runtime::monoid::MonoidOp::Max,
@@ -333,7 +332,7 @@ impl Generator<'_, '_, '_> {
                                 &field,
                                 &mut self.builder.functions,
                             )
-                            .map_err(error)?;
+                            .map_err(RunError::internal)?;
                             let _ = writeln!(
                                 self.builder.body,
                                 "    if ({name}_write) {{ {update}({name}_index, 0u, i + 1u); }}"
@@ -400,10 +399,9 @@ impl Generator<'_, '_, '_> {
         arguments: &mut Vec<String>,
     ) -> Result<(), RunError> {
         for ((name, _), value) in op.named.iter().zip(&values.named) {
-            let expression = self
-                .builder
-                .param_host(*value)
-                .map_err(|e| error(format!("`{}` argument `{name}`: {e}", op.label())))?;
+            let expression = self.builder.param_host(*value).map_err(|e| {
+                RunError::bad_input(format!("`{}` argument `{name}`: {e}", op.label()))
+            })?;
             arguments.push(expression);
         }
         Ok(())
@@ -437,7 +435,7 @@ impl Generator<'_, '_, '_> {
             self.call.records,
             &self.backend.buffers,
         )
-        .map_err(Self::gpu_error)?;
+        .map_err(RunError::from)?;
         let store = self.builder.array_store(&array, "i", name);
         self.builder.body.push_str("    ");
         self.builder.body.push_str(&store);
@@ -454,11 +452,9 @@ impl Generator<'_, '_, '_> {
     ) -> Result<(String, FunctorKind), RunError> {
         let call = self.call;
         let name = op.functor.as_deref().unwrap_or_default();
-        let functor = self
-            .backend
-            .library
-            .get(name)
-            .ok_or_else(|| error(format!("functor `{name}` is not in this run's library")))?;
+        let functor = self.backend.library.get(name).ok_or_else(|| {
+            RunError::internal(format!("functor `{name}` is not in this run's library"))
+        })?;
         let inputs: Vec<ElemType> = op
             .inputs
             .iter()
@@ -469,7 +465,7 @@ impl Generator<'_, '_, '_> {
             .collect::<Result<_, _>>()?;
         let outputs: Vec<ElemType> = op.outputs.iter().map(|v| call.elem_type(*v)).collect();
         if outputs.len() != 1 {
-            return Err(error(format!(
+            return Err(RunError::bad_input(format!(
                 "`{}` has {} outputs; GPU twins have one",
                 op.label(),
                 outputs.len()
@@ -484,7 +480,7 @@ impl Generator<'_, '_, '_> {
                 records: call.records,
                 resources: self.backend.resources,
             })
-            .map_err(|e| error(e.0))?;
+            .map_err(RunError::from)?;
         // The twin's failures, numbered by the backend. Twins do not know the
         // element index, so the failure reports only the code.
         let mut fail = format!("fn {function}_fail(code: u32) {{\n    switch code {{\n");

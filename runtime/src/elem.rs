@@ -5,6 +5,7 @@
 //! functors and the GPU backend's read-back all use it.
 
 use crate::column::{Column, ColumnView};
+use crate::error::ErrorKind;
 use crate::functor::FunctorError;
 use crate::host::HostValue;
 use crate::monoid::{monoid_name, MonoidOp};
@@ -39,7 +40,23 @@ pub enum KernelError {
 // Functors call kernels for their per-chunk work and report kernel errors as their own.
 impl From<KernelError> for FunctorError {
     fn from(error: KernelError) -> FunctorError {
-        FunctorError(error.to_string())
+        FunctorError::new(error.kind(), error.to_string())
+    }
+}
+
+impl KernelError {
+    /// Bad user data (an index out of range, a group that does not fit) is
+    /// the user's; a type mismatch or an operation that type checking
+    /// admitted is a bug of ours.
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            KernelError::IndexOutOfRange { .. }
+            | KernelError::LengthMismatch { .. }
+            | KernelError::EmptyGroup => ErrorKind::BadInput,
+            KernelError::TypeMismatch { .. } | KernelError::UnsupportedOperation { .. } => {
+                ErrorKind::Internal
+            }
+        }
     }
 }
 

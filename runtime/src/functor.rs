@@ -4,6 +4,7 @@
 //! plan compiler and a chunk-wise CPU implementation for the CPU backend.
 
 use crate::column::{Column, ColumnView};
+use crate::error::ErrorKind;
 use crate::host::{HostValue, UniformSchema, Uniforms};
 use crate::monoid::MonoidOp;
 use crate::types::{ElemType, HostType, RecordRegistry};
@@ -173,7 +174,7 @@ impl CallContext<'_> {
 
     pub fn resources<T: Any>(&self) -> Result<&T, FunctorError> {
         self.resources.downcast_ref::<T>().ok_or_else(|| {
-            FunctorError(format!(
+            FunctorError::bad_input(format!(
                 "this functor needs {} but the run has none (no scene loaded?)",
                 std::any::type_name::<T>()
             ))
@@ -181,13 +182,35 @@ impl CallContext<'_> {
     }
 }
 
-/// A run-time failure inside a functor (a missing scene, an index out of range).
+/// A run-time failure inside a functor (a missing scene, an index out of range),
+/// with the kind that decides the exit status.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct FunctorError(pub String);
+pub struct FunctorError {
+    pub kind: ErrorKind,
+    pub message: String,
+}
+
+impl FunctorError {
+    pub fn new(kind: ErrorKind, message: impl Into<String>) -> FunctorError {
+        FunctorError {
+            kind,
+            message: message.into(),
+        }
+    }
+
+    /// The input the functor was given is wrong: the common case.
+    pub fn bad_input(message: impl Into<String>) -> FunctorError {
+        FunctorError::new(ErrorKind::BadInput, message)
+    }
+
+    pub fn internal(message: impl Into<String>) -> FunctorError {
+        FunctorError::new(ErrorKind::Internal, message)
+    }
+}
 
 impl fmt::Display for FunctorError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
+        f.write_str(&self.message)
     }
 }
 

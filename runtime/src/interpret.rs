@@ -7,6 +7,9 @@
 use crate::column::Column;
 use crate::compile::host_eval::{eval_host, HostEnvironment};
 use crate::compile::ir::*;
+use crate::elem::KernelError;
+use crate::error::ErrorKind;
+use crate::functor::FunctorError;
 use crate::host::{HostValue, Uniforms};
 use crate::types::{ElemType, RecordRegistry};
 use std::sync::Arc;
@@ -114,12 +117,49 @@ pub struct RunResult {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{message}")]
 pub struct RunError {
+    pub kind: ErrorKind,
     pub message: String,
 }
 
-pub fn error(message: impl Into<String>) -> RunError {
-    RunError {
-        message: message.into(),
+impl RunError {
+    pub fn new(kind: ErrorKind, message: impl Into<String>) -> RunError {
+        RunError {
+            kind,
+            message: message.into(),
+        }
+    }
+
+    pub fn bad_input(message: impl Into<String>) -> RunError {
+        RunError::new(ErrorKind::BadInput, message)
+    }
+
+    pub fn resource_limit(message: impl Into<String>) -> RunError {
+        RunError::new(ErrorKind::ResourceLimit, message)
+    }
+
+    pub fn device(message: impl Into<String>) -> RunError {
+        RunError::new(ErrorKind::Device, message)
+    }
+
+    pub fn internal(message: impl Into<String>) -> RunError {
+        RunError::new(ErrorKind::Internal, message)
+    }
+
+    /// The same error, its message behind `context: `.
+    pub fn within(self, context: impl std::fmt::Display) -> RunError {
+        RunError::new(self.kind, format!("{context}: {}", self.message))
+    }
+}
+
+impl From<KernelError> for RunError {
+    fn from(error: KernelError) -> RunError {
+        RunError::new(error.kind(), error.to_string())
+    }
+}
+
+impl From<FunctorError> for RunError {
+    fn from(error: FunctorError) -> RunError {
+        RunError::new(error.kind, error.message)
     }
 }
 
@@ -144,7 +184,7 @@ pub struct Slots<A> {
 impl<A> Slots<A> {
     pub fn array(&self, plan: &Plan, var: VarId) -> Result<&A, RunError> {
         self.arrays[var.0 as usize].as_ref().ok_or_else(|| {
-            error(format!(
+            RunError::internal(format!(
                 "`{}` is read before it has a value",
                 plan.var(var).name
             ))
@@ -280,7 +320,7 @@ pub fn interpret_with_inputs<B: Backend>(
         match interpreter.outputs.iter().rev().find(|(n, _)| n == name) {
             Some(found) => outputs.push(found.clone()),
             None => {
-                return Err(error(format!(
+                return Err(RunError::bad_input(format!(
                     "output `{name}` was never written (its `out` did not run)"
                 )))
             }
@@ -340,18 +380,20 @@ impl<'a, B: Backend> Interpreter<'a, B> {
             uniforms: self.uniforms,
             backend: std::marker::PhantomData,
         };
-        eval_host(expr, &environment).map_err(error)
+        eval_host(expr, &environment).map_err(RunError::bad_input)
     }
 
     fn eval_count(&self, expr: &HostExpr, what: &str) -> Result<usize, RunError> {
         let value = self.eval(expr)?;
         match value.as_int() {
             Some(n) if n >= 0 && (n as u64) <= MAX_ELEMENTS as u64 => Ok(n as usize),
-            Some(n) if n < 0 => Err(error(format!("{what} is negative ({n})"))),
-            Some(n) => Err(error(format!(
+            Some(n) if n < 0 => Err(RunError::bad_input(format!("{what} is negative ({n})"))),
+            Some(n) => Err(RunError::resource_limit(format!(
                 "{what} is {n}, above the limit of {MAX_ELEMENTS} elements"
             ))),
-            None => Err(error(format!("{what} must be an integer, found {value}"))),
+            None => Err(RunError::bad_input(format!(
+                "{what} must be an integer, found {value}"
+            ))),
         }
     }
 
@@ -370,11 +412,10 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                         .expect("every stage is in the plan");
                     let start = Instant::now();
                     let (elements, measured) = self.stage(stage).map_err(|e| {
-                        error(format!(
-                            "stage {} [{}]: {}",
+                        e.within(format_args!(
+                            "stage {} [{}]",
                             number + 1,
-                            self.profile[number].label,
-                            e.message
+                            self.profile[number].label
                         ))
                     })?;
                     let timing = &mut self.profile[number];
@@ -415,7 +456,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                         _ => None,
                     };
                     let view = view.ok_or_else(|| {
-                        error(format!(
+                        RunError::internal(format!(
                             "`{}` has no field `{field}`",
                             self.plan.var(*src).name
                         ))
@@ -435,7 +476,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                 } => {
                     let (start, end) = (self.eval(start)?, self.eval(end)?);
                     let (Some(start), Some(end)) = (start.as_int(), end.as_int()) else {
-                        return Err(error("loop bounds must be integers"));
+                        return Err(RunError::bad_input("loop bounds must be integers"));
                     };
                     for i in start..end {
                         self.slots.set_host(*var, HostValue::Int(i));
@@ -449,7 +490,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                     while self.eval(cond)?.as_bool() == Some(true) {
                         iterations += 1;
                         if iterations > MAX_WHILE_ITERATIONS {
-                            return Err(error(format!(
+                            return Err(RunError::resource_limit(format!(
                                 "a `while` loop ran {MAX_WHILE_ITERATIONS} times; stopping (is its condition ever false?)"
                             )));
                         }
@@ -476,10 +517,11 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                 Node::Break => return Ok(Flow::Break),
                 Node::Output { name, var } => {
                     let value = match self.plan.var(*var).ty {
-                        VarType::Host(_) => OutputValue::Host(
-                            self.slots.hosts[var.0 as usize]
-                                .ok_or_else(|| error(format!("output `{name}` has no value")))?,
-                        ),
+                        VarType::Host(_) => {
+                            OutputValue::Host(self.slots.hosts[var.0 as usize].ok_or_else(
+                                || RunError::internal(format!("output `{name}` has no value")),
+                            )?)
+                        }
                         _ => {
                             let array = self.slots.array(self.plan, *var)?.clone();
                             OutputValue::Array(self.backend.to_column(&array)?)
@@ -507,7 +549,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                 OpKind::GroupGather { group: k } | OpKind::Expand { fanout: k } => {
                     let k = self.eval_count(k, "the group size")?;
                     if k == 0 {
-                        return Err(error("a group or fan-out of 0 elements"));
+                        return Err(RunError::bad_input("a group or fan-out of 0 elements"));
                     }
                     k
                 }
@@ -541,7 +583,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
             OpKind::GroupGather { .. } => {
                 let src = self.array_len(head.inputs[0])?;
                 if src % k != 0 {
-                    return Err(error(format!("group gather of {src} elements in groups of {k}: {src} is not a multiple of {k}")));
+                    return Err(RunError::bad_input(format!("group gather of {src} elements in groups of {k}: {src} is not a multiple of {k}")));
                 }
                 src / k
             }
@@ -551,7 +593,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                     .checked_mul(k)
                     .filter(|n| *n <= MAX_ELEMENTS);
                 n.ok_or_else(|| {
-                    error(format!(
+                    RunError::resource_limit(format!(
                         "fan-out by {k} makes more than {MAX_ELEMENTS} elements"
                     ))
                 })?
@@ -561,7 +603,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
         for &v in &stage.reads_direct {
             let found = self.array_len(v)?;
             if found != len {
-                return Err(error(format!(
+                return Err(RunError::bad_input(format!(
                     "length mismatch: `{}` has {found} elements, but the stage runs over {len}",
                     self.plan.var(v).name
                 )));

@@ -3,12 +3,14 @@
 
 pub mod column;
 pub mod elem;
+pub mod error;
 pub mod functor;
 pub mod host;
 pub mod monoid;
 pub mod types;
 
 pub use column::{Column, ColumnView};
+pub use error::ErrorKind;
 pub use functor::{
     ArrayParam, CallContext, Functor, FunctorError, FunctorKind, FunctorLibrary, NamedParam,
     Signature, TypeConstraint, TypePattern,

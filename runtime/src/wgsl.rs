@@ -224,7 +224,7 @@ pub fn twin_parameters(
 
 /// The error a functor without a twin gives the GPU backend.
 pub fn no_twin(name: &str) -> FunctorError {
-    FunctorError(format!(
+    FunctorError::bad_input(format!(
         "functor `{name}` has no WGSL twin, so it cannot run on the GPU backend"
     ))
 }

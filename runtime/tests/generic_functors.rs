@@ -103,7 +103,7 @@ fn check(cases: Vec<(Call, Result<Column, &str>)>) {
         let output_type = expected
             .as_ref()
             .map_or(ElemType::U32, |column| column.elem_type());
-        let result = run(&library, &call, output_type).map_err(|error| error.0);
+        let result = run(&library, &call, output_type).map_err(|error| error.message);
         assert_eq!(
             result,
             expected.map_err(str::to_string),

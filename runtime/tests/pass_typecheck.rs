@@ -36,7 +36,7 @@ impl Functor for MakePair {
     ) -> Result<(), FunctorError> {
         let x = inputs[0].as_u32();
         let Column::Record { ty, .. } = &outputs[0] else {
-            return Err(FunctorError("Pair is a record".into()));
+            return Err(FunctorError::bad_input("Pair is a record"));
         };
         outputs[0] = Column::Record {
             ty: *ty,

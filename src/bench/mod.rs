@@ -22,7 +22,8 @@ use crate::scene_setup::{self, SceneRequest, SceneSetup};
 use crate::{volume_setup, Backend, Failure};
 use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::cpu::column_pool::ColumnPool;
-use dpp_runtime::cpu::exec::{run_plan, OpTiming, OutputValue, RunContext, RunResult, StageTiming};
+use dpp_runtime::cpu::exec::{run_plan, RunContext};
+use dpp_runtime::interpret::{OpTiming, OutputValue, RunResult, StageTiming};
 use dpp_runtime::{CompileOptions, FunctorLibrary, Plan};
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
 use dpp_tracer::camera::sample_offset;
@@ -670,7 +671,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                     (Engine::EmbreePacket, EmbreeMode::Packet16),
                 ] {
                     let swapped = library_with_embree(library, embree.clone(), mode)
-                        .map_err(|e| Failure::Run(e.0))?;
+                        .map_err(|e| Failure::Run(e.message))?;
                     for workload in [2, 3] {
                         let Some(path) = path_of(workload) else {
                             continue;

@@ -3,7 +3,7 @@
 
 use super::{ms, Engine, Measurement, SceneResult, AGREEMENT};
 use dpp_gpu::GpuContext;
-use dpp_runtime::cpu::exec::listed_op_shares;
+use dpp_runtime::interpret::listed_op_shares;
 use serde_json::{json, Value};
 use std::fmt::Write;
 

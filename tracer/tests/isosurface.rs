@@ -7,7 +7,8 @@
 use dpp_gpu::{gpu_for_tests, run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::compile::{compile_file, CompileOptions};
 use dpp_runtime::cpu::column_pool::ColumnPool;
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
+use dpp_runtime::cpu::exec::{run_plan, RunContext};
+use dpp_runtime::interpret::OutputValue;
 use dpp_runtime::{Column, HostValue};
 use dpp_tracer::functors::isosurface::{
     triangles_to_mesh, volume_uniforms, write_obj, write_ply, TriangleColumns, VolumeResources,

@@ -5,7 +5,8 @@
 
 use dpp_runtime::compile::{compile_file, CompileOptions};
 use dpp_runtime::cpu::column_pool::ColumnPool;
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
+use dpp_runtime::cpu::exec::{run_plan, RunContext};
+use dpp_runtime::interpret::OutputValue;
 use dpp_tracer::shading::{Material, MeshMaterials};
 use dpp_tracer::{Camera, CameraSetup, PointLight, TraceResources, TraceScene, TriangleMesh};
 use glam::Vec3;

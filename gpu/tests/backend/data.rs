@@ -120,7 +120,7 @@ impl Functor for DataFunctor {
         let column = &data.columns[ctx.named(0).as_int().unwrap() as usize];
         let indices = inputs[0].as_u32();
         outputs[0] = dpp_runtime::cpu::kernels::gather(indices, &column.view())
-            .map_err(|e| FunctorError(e.to_string()))?;
+            .map_err(|e| FunctorError::bad_input(e.to_string()))?;
         Ok(())
     }
 
@@ -129,7 +129,7 @@ impl Functor for DataFunctor {
         let data = request
             .resources
             .downcast_ref::<Data>()
-            .ok_or_else(|| FunctorError("no test data".into()))?;
+            .ok_or_else(|| FunctorError::bad_input("no test data"))?;
         let function = request.function;
         let ty = request.outputs[0];
         let wgsl = dpp_runtime::wgsl::elem_type_wgsl(ty, request.records);

@@ -4,7 +4,8 @@
 
 use dpp_gpu::{run_plan_gpu, GpuContext, GpuLimits, GpuRunContext};
 use dpp_runtime::cpu::column_pool::ColumnPool;
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext, RunResult};
+use dpp_runtime::cpu::exec::{run_plan, RunContext};
+use dpp_runtime::interpret::{OutputValue, RunResult};
 use dpp_runtime::*;
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;

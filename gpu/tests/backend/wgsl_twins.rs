@@ -93,7 +93,7 @@ fn check(
         records: &library.records,
         resources: &(),
     };
-    let twin = functor.wgsl(&request).map_err(|error| error.0)?;
+    let twin = functor.wgsl(&request).map_err(|error| error.message)?;
     if !twin.source.contains(&format!("fn {function}(")) {
         return Err(format!("does not define `{function}`:\n{}", twin.source));
     }

@@ -13,8 +13,8 @@ use crate::elem::Element;
 use crate::functor::{CallContext, FunctorLibrary};
 use crate::host::Uniforms;
 use crate::interpret::{
-    elementwise_materialised, error, interpret, Backend, OpHostValues, Slots, StageCall,
-    StageMeasurement,
+    elementwise_materialised, interpret, Backend, OpHostValues, RunError, RunResult, Slots,
+    StageCall, StageMeasurement,
 };
 use crate::types::ElemType;
 use std::any::Any;
@@ -33,11 +33,6 @@ pub struct RunContext<'a> {
     /// runs many frames keeps one pool for all of them.
     pub column_pool: &'a ColumnPool,
 }
-
-pub use crate::interpret::{
-    listed_op_shares, OpTiming, OutputValue, RunError, RunResult, StageTiming, MAX_ELEMENTS,
-    MAX_WHILE_ITERATIONS,
-};
 
 /// Runs `plan` on the CPU.
 pub fn run_plan(plan: &Plan, context: &RunContext<'_>) -> Result<RunResult, RunError> {
@@ -387,7 +382,7 @@ impl StageRun<'_, '_> {
                         &values.view(&range),
                         &mut dst,
                     )
-                    .map_err(|e| error(e.to_string()))?;
+                    .map_err(RunError::from)?;
             }
         }
         self.store(op.outputs[0], dst);
@@ -404,7 +399,6 @@ impl StageRun<'_, '_> {
         number: usize,
     ) -> Result<(), RunError> {
         let records = &self.context.library.records;
-        let kernel_error = |e: crate::elem::KernelError| error(e.to_string());
         match &op.kind {
             OpKind::Scatter {
                 combine: Some(combine),
@@ -426,7 +420,7 @@ impl StageRun<'_, '_> {
                     let mask = mask.as_ref().map(|m| m.view(&range));
                     let mask = mask.as_ref().map(|m| m.as_bool());
                     kernels::scatter_combine(*combine, indices.as_u32(), &values, mask, &mut dst)
-                        .map_err(kernel_error)?;
+                        .map_err(RunError::from)?;
                 }
                 self.store(op.outputs[0], dst);
             }
@@ -440,7 +434,7 @@ impl StageRun<'_, '_> {
                     .collect();
                 let ty = self.elem_type(op.inputs[0]);
                 let value =
-                    kernels::reduce_to_host(*monoid, ty, &partials).map_err(kernel_error)?;
+                    kernels::reduce_to_host(*monoid, ty, &partials).map_err(RunError::from)?;
                 self.slots.set_host(op.outputs[0], value);
             }
             OpKind::Scan {
@@ -456,7 +450,8 @@ impl StageRun<'_, '_> {
                         _ => unreachable!(),
                     })
                     .collect();
-                let carries = kernels::scan_carries(*monoid, ty, &totals).map_err(kernel_error)?;
+                let carries =
+                    kernels::scan_carries(*monoid, ty, &totals).map_err(RunError::from)?;
                 use rayon::prelude::*;
                 // Each chunk's scanned values go straight to their range of the result.
                 let len = self.call.len;
@@ -484,7 +479,7 @@ impl StageRun<'_, '_> {
                         )?;
                         target.write_range(range.start, &part.view())
                     })
-                    .map_err(kernel_error)?;
+                    .map_err(RunError::from)?;
                 self.store(op.outputs[0], target.into_column());
             }
             _ => unreachable!("plain scatters finish in `finish_direct_scatter`"),
@@ -544,13 +539,14 @@ impl StageRun<'_, '_> {
                     (range.start as u32..range.end as u32).collect(),
                 )),
                 OpKind::Fill { .. } => produced.push(
-                    Column::filled(values.fill.expect("fill value"), range.len()).map_err(error)?,
+                    Column::filled(values.fill.expect("fill value"), range.len())
+                        .map_err(RunError::internal)?,
                 ),
                 OpKind::Field { field } => {
                     let src = lookup(&locals, op.inputs[0])?;
                     let (ChunkValue::Chunk(column) | ChunkValue::Whole(column)) = &src;
                     let Column::Record { ty, .. } = column.as_ref() else {
-                        return Err(error("field of a non-record array"));
+                        return Err(RunError::internal("field of a non-record array"));
                     };
                     let index = records
                         .get(*ty)
@@ -575,14 +571,14 @@ impl StageRun<'_, '_> {
                     let mut outputs = new_outputs(range.len());
                     functor
                         .run_cpu(&functor_context(range.start), &views, &mut outputs)
-                        .map_err(|e| error(e.0))?;
+                        .map_err(RunError::from)?;
                     produced = outputs;
                 }
                 OpKind::Gather => {
                     let indices = lookup(&locals, op.inputs[0])?;
                     let src = self.array(op.inputs[1])?;
                     let gathered = kernels::gather(indices.view(&range).as_u32(), &src.view())
-                        .map_err(|e| error(e.to_string()))?;
+                        .map_err(RunError::from)?;
                     produced.push(gathered);
                 }
                 OpKind::GroupGather { .. } | OpKind::Expand { .. } => {
@@ -603,7 +599,7 @@ impl StageRun<'_, '_> {
                             &[src.view(&source_range)],
                             &mut outputs,
                         )
-                        .map_err(|e| error(e.0))?;
+                        .map_err(RunError::from)?;
                     produced = outputs;
                 }
                 OpKind::Scatter { mask, .. } => {
@@ -619,7 +615,7 @@ impl StageRun<'_, '_> {
                             slot => slot.insert(
                                 direct.groups[*group]
                                     .claim(index_view.as_u32(), mask_view)
-                                    .map_err(|e| error(e.to_string()))?,
+                                    .map_err(RunError::from)?,
                             ),
                         };
                         target
@@ -629,7 +625,7 @@ impl StageRun<'_, '_> {
                                 mask_view,
                                 &values.view(&range),
                             )
-                            .map_err(|e| error(e.to_string()))?;
+                            .map_err(RunError::from)?;
                         let kept = claimed.kept_aside();
                         sinks.push(SinkPart::Written(kept.then(|| (indices.clone(), values))));
                         continue;
@@ -643,7 +639,7 @@ impl StageRun<'_, '_> {
                 OpKind::Reduce { op: monoid } => {
                     let input = lookup(&locals, op.inputs[0])?;
                     let partial = kernels::reduce_partial(*monoid, &input.view(&range))
-                        .map_err(|e| error(e.to_string()))?;
+                        .map_err(RunError::from)?;
                     sinks.push(SinkPart::Reduce(partial));
                 }
                 OpKind::Scan {
@@ -659,7 +655,7 @@ impl StageRun<'_, '_> {
                         &input.view(&range),
                         flag_view.as_ref().map(|f| f.as_bool()),
                     )
-                    .map_err(|e| error(e.to_string()))?;
+                    .map_err(RunError::from)?;
                     sinks.push(SinkPart::Scan {
                         values: input,
                         flags,
@@ -669,7 +665,7 @@ impl StageRun<'_, '_> {
             }
             for (output, column) in op.outputs.iter().zip(produced) {
                 if column.elem_type() != self.elem_type(*output) {
-                    return Err(error(format!(
+                    return Err(RunError::internal(format!(
                         "`{}` produced {} elements where its signature says {} (a functor bug)",
                         op.label(),
                         column.elem_type().name(records),
@@ -677,7 +673,7 @@ impl StageRun<'_, '_> {
                     )));
                 }
                 if column.len() != range.len() {
-                    return Err(error(format!(
+                    return Err(RunError::internal(format!(
                         "`{}` produced {} elements for a chunk of {} (a functor bug)",
                         op.label(),
                         column.len(),
@@ -695,7 +691,7 @@ impl StageRun<'_, '_> {
             for (var, target) in materialised {
                 target
                     .write_range(range.start, &lookup(&locals, *var)?.view(&range))
-                    .map_err(|e| error(e.to_string()))?;
+                    .map_err(RunError::from)?;
             }
             op_times.push(store_start.elapsed());
         }
@@ -709,9 +705,8 @@ impl StageRun<'_, '_> {
 
     fn functor(&self, op: &Op) -> Result<&Arc<dyn crate::functor::Functor>, RunError> {
         let name = op.functor.as_deref().unwrap_or_default();
-        self.context
-            .library
-            .get(name)
-            .ok_or_else(|| error(format!("functor `{name}` is not in this run's library")))
+        self.context.library.get(name).ok_or_else(|| {
+            RunError::internal(format!("functor `{name}` is not in this run's library"))
+        })
     }
 }

@@ -271,7 +271,7 @@ fn divide(ctx: &CallContext<'_>, inputs: &[ColumnView<'_>]) -> Result<Column, Fu
         let (a, b) = operands::<T>(inputs)?;
         let quotients = a.iter().zip(b).enumerate().map(|(position, (&x, &y))| {
             x.divide(y).ok_or_else(|| {
-                FunctorError(format!(
+                FunctorError::bad_input(format!(
                     "{DIVISION_BY_ZERO} at element {}",
                     ctx.first_index + position
                 ))
@@ -583,7 +583,7 @@ fn seed(ctx: &CallContext<'_>) -> Result<u32, FunctorError> {
     match ctx.named.first() {
         // Modulo 2^32, so negative seeds are usable too.
         Some(HostValue::Int(seed)) => Ok(*seed as u32),
-        other => Err(FunctorError(format!(
+        other => Err(FunctorError::bad_input(format!(
             "internal error: the seed should be an integer, got {other:?}"
         ))),
     }

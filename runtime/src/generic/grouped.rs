@@ -124,7 +124,7 @@ fn fold_group(request: &WgslRequest<'_>, element: &str, result: &str) -> Body {
 
 fn lane(ctx: &CallContext<'_>, inputs: &[ColumnView<'_>]) -> Result<Column, FunctorError> {
     let lanes = u32::try_from(ctx.group).map_err(|_| {
-        FunctorError(format!(
+        FunctorError::bad_input(format!(
             "a fan-out of {} lanes does not fit lane numbers in u32",
             ctx.group
         ))

@@ -74,7 +74,7 @@ impl Functor for GenericFunctor {
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let (inputs, outputs) = (&self.signature.inputs, &self.signature.outputs);
         if request.inputs.len() != inputs.len() || request.outputs.len() != outputs.len() {
-            return Err(FunctorError(format!(
+            return Err(FunctorError::bad_input(format!(
                 "internal error: a WGSL twin of `{}` was asked for {} inputs and {} outputs",
                 self.signature.name,
                 request.inputs.len(),
@@ -235,7 +235,7 @@ fn functor(
 /// The error for input types the signature excludes: the type checker let a
 /// call through that it should have rejected.
 fn unexpected_type(ty: ElemType) -> FunctorError {
-    FunctorError(format!(
+    FunctorError::bad_input(format!(
         "internal error: a generic functor received {ty:?} elements, which its signature excludes"
     ))
 }

@@ -6,7 +6,8 @@
 use dpp_runtime::compile::ir::{Node, Plan, VarInfo};
 use dpp_runtime::compile::plan_text::plan_to_text;
 use dpp_runtime::cpu::column_pool::ColumnPool;
-use dpp_runtime::cpu::exec::{run_plan, OutputValue, RunContext};
+use dpp_runtime::cpu::exec::{run_plan, RunContext};
+use dpp_runtime::interpret::OutputValue;
 use dpp_runtime::*;
 use std::path::{Path, PathBuf};
 

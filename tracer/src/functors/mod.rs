@@ -585,7 +585,7 @@ pub(crate) fn scene_diagonal(ctx: &CallContext<'_>, functor: &str) -> Result<f32
         .and_then(|value| value.as_f32())
         .filter(|diagonal| diagonal.is_finite() && *diagonal > 0.0)
         .ok_or_else(|| {
-            FunctorError(format!(
+            FunctorError::bad_input(format!(
                 "{functor}: the scene.diagonal uniform is missing or not a positive number (no scene loaded?)"
             ))
         })
@@ -600,7 +600,7 @@ pub(crate) fn named_f32(
 ) -> Result<f32, FunctorError> {
     let value = ctx.named(index);
     value.as_f32().filter(|v| v.is_finite()).ok_or_else(|| {
-        FunctorError(format!(
+        FunctorError::bad_input(format!(
             "{functor}: {name} must be a finite number, got {value}"
         ))
     })
@@ -612,7 +612,7 @@ pub(crate) fn record_fields_mut<const N: usize>(
     column: &mut Column,
 ) -> Result<[&mut Column; N], FunctorError> {
     let type_error = |found: ElemType| {
-        FunctorError(format!(
+        FunctorError::bad_input(format!(
             "internal error: expected a record output with {N} fields, got {found:?}"
         ))
     };
@@ -875,7 +875,7 @@ pub(crate) mod test_support {
             records: &library.records,
             resources,
         };
-        let twin = functor.wgsl(&request).map_err(|e| e.0)?;
+        let twin = functor.wgsl(&request).map_err(|e| e.message)?;
         dpp_gpu::check_twin(signature, &request, &twin, &library.uniforms)?;
         let fail = format!("{function}_fail(");
         let mut raised: Vec<usize> = twin

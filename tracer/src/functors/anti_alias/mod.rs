@@ -70,7 +70,9 @@ impl Functor for AntiAlias {
     ) -> Result<(), FunctorError> {
         let samples = ctx.group;
         if samples == 0 {
-            return Err(FunctorError("antiAlias: group must be at least 1".into()));
+            return Err(FunctorError::bad_input(
+                "antiAlias: group must be at least 1",
+            ));
         }
         let colors = inputs[0].as_vec3();
         let scale = 1.0 / samples as f32;

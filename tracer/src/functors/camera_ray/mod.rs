@@ -79,7 +79,7 @@ impl Functor for CameraRay {
             .as_u32()
             .filter(|&spp| check_samples_per_pixel(spp).is_ok())
             .ok_or_else(|| {
-                FunctorError(format!(
+                FunctorError::bad_input(format!(
                     "cameraRay: spp must be 1 or 4 (the sample patterns of the camera), got {spp_value}"
                 ))
             })?;
@@ -99,7 +99,7 @@ impl Functor for CameraRay {
                 .iter()
                 .find(|&&index| u64::from(index) >= limit)
                 .expect("the largest index is out of range");
-            return Err(FunctorError(format!(
+            return Err(FunctorError::bad_input(format!(
                 "cameraRay: ray index {index} is out of range for {} pixels x {spp} samples",
                 morton.len()
             )));
@@ -317,13 +317,13 @@ mod tests {
             let error = fixture
                 .run("cameraRay", &[HostValue::Int(spp)], 0, &[indices.view()])
                 .unwrap_err();
-            assert!(error.0.contains("spp must be 1 or 4"), "{error}");
+            assert!(error.message.contains("spp must be 1 or 4"), "{error}");
         }
         let beyond = Column::U32(vec![12]);
         let error = fixture
             .run("cameraRay", &[HostValue::Int(1)], 0, &[beyond.view()])
             .unwrap_err();
-        assert!(error.0.contains("out of range"), "{error}");
+        assert!(error.message.contains("out of range"), "{error}");
         let beyond = Column::U32(vec![47, 48]);
         assert!(fixture
             .run("cameraRay", &[HostValue::Int(4)], 0, &[beyond.view()])

@@ -69,7 +69,7 @@ impl Functor for CaseTriangles {
         out.reserve(cases.len());
         for &case in cases {
             let count = counts.get(case as usize).ok_or_else(|| {
-                FunctorError(format!(
+                FunctorError::bad_input(format!(
                     "caseTriangles: case {case} is not a marching-cubes case (0..255)"
                 ))
             })?;

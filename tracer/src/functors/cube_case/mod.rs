@@ -57,7 +57,7 @@ impl Functor for CubeCase {
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let volume = request_resources::<VolumeResources>(request, "cubeCase")?
             .gpu_buffers()
-            .map_err(|e| FunctorError(format!("cubeCase: {e}")))?;
+            .map_err(|e| FunctorError::bad_input(format!("cubeCase: {e}")))?;
         let parts = TwinParts {
             constants: Vec::new(),
             modules: vec![vector_module(), volume_module(&volume)],

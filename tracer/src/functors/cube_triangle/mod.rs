@@ -70,7 +70,7 @@ impl Functor for CubeTriangle {
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let volume = request_resources::<VolumeResources>(request, "cubeTriangle")?
             .gpu_buffers()
-            .map_err(|e| FunctorError(format!("cubeTriangle: {e}")))?;
+            .map_err(|e| FunctorError::bad_input(format!("cubeTriangle: {e}")))?;
         let parts = TwinParts {
             constants: Vec::new(),
             modules: vec![
@@ -105,7 +105,7 @@ impl Functor for CubeTriangle {
             let case = case_index(&values, level);
             let triangles = tables.case_triangles(case);
             let Some(edges) = triangles.get(lane as usize) else {
-                return Err(FunctorError(format!(
+                return Err(FunctorError::bad_input(format!(
                     "cubeTriangle: cell {cell} has {} triangles at level {level}, no triangle {lane}",
                     triangles.len()
                 )));

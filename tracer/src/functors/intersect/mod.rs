@@ -143,6 +143,6 @@ mod tests {
         let error = functor
             .run_cpu(&ctx, &[rays.view()], &mut outputs)
             .unwrap_err();
-        assert!(error.0.contains("no scene loaded"), "{error}");
+        assert!(error.message.contains("no scene loaded"), "{error}");
     }
 }

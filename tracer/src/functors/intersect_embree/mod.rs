@@ -307,7 +307,9 @@ pub fn library_with_embree(
         library
             .get(name)
             .map(|functor| functor.signature().clone())
-            .ok_or_else(|| FunctorError(format!("the library has no `{name}` functor to replace")))
+            .ok_or_else(|| {
+                FunctorError::bad_input(format!("the library has no `{name}` functor to replace"))
+            })
     };
     let intersect: Arc<dyn Functor> = Arc::new(EmbreeIntersect::new(
         signature("intersect")?,

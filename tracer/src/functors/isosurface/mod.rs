@@ -178,7 +178,7 @@ pub(crate) fn run_volume<'a>(
     let volume = &ctx.resources::<VolumeResources>()?.volume;
     let expected = volume.dims.x as u64 * volume.dims.y as u64 * volume.dims.z as u64;
     if volume.values.len() as u64 != expected {
-        return Err(FunctorError(format!(
+        return Err(FunctorError::bad_input(format!(
             "{functor}: the volume has {} values for {}×{}×{} samples",
             volume.values.len(),
             volume.dims.x,
@@ -203,7 +203,7 @@ pub(crate) fn cell_origin(
 ) -> Result<UVec3, FunctorError> {
     let dims = volume.cell_dims();
     if cell as u64 >= volume.cell_count() {
-        return Err(FunctorError(format!(
+        return Err(FunctorError::bad_input(format!(
             "{functor}: cell {cell}, but the volume has {} cells",
             volume.cell_count()
         )));

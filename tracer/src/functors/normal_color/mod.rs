@@ -97,7 +97,7 @@ impl Functor for NormalColor {
                 continue;
             }
             if prim as usize >= mesh.triangles.len() {
-                return Err(FunctorError(format!(
+                return Err(FunctorError::bad_input(format!(
                     "normalColor: hit names triangle {prim}, but the scene has {} triangles",
                     mesh.triangles.len()
                 )));
@@ -162,6 +162,6 @@ mod tests {
         let error = fixture
             .run("normalColor", &[], 0, &[rays.view(), bad.view()])
             .unwrap_err();
-        assert!(error.0.contains("triangle 99"), "{error}");
+        assert!(error.message.contains("triangle 99"), "{error}");
     }
 }

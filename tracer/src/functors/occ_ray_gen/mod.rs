@@ -90,8 +90,9 @@ impl Functor for OccRayGen {
     ) -> Result<(), FunctorError> {
         let range = named_f32(ctx, 0, "occRayGen", "range")?;
         let diagonal = scene_diagonal(ctx, "occRayGen")?;
-        let lanes = u32::try_from(ctx.group)
-            .map_err(|_| FunctorError(format!("occRayGen: fanout {} is too large", ctx.group)))?;
+        let lanes = u32::try_from(ctx.group).map_err(|_| {
+            FunctorError::bad_input(format!("occRayGen: fanout {} is too large", ctx.group))
+        })?;
         let epsilon = SURFACE_EPSILON * diagonal;
         let length = range * diagonal;
         let reaches = length > 0.0;
@@ -330,7 +331,7 @@ mod tests {
                 &[surfaces.view()],
             )
             .unwrap_err();
-        assert!(error.0.contains("range"), "{error}");
+        assert!(error.message.contains("range"), "{error}");
     }
 
     #[test]

@@ -92,7 +92,7 @@ impl Functor for Reflect {
         if let Some(index) = (0..surfaces.len())
             .find(|&i| reflects(i) && surfaces.material[i] as usize >= materials.len())
         {
-            return Err(FunctorError(format!(
+            return Err(FunctorError::bad_input(format!(
                 "reflect: surface has material {}, but the scene has {} materials",
                 surfaces.material[index],
                 materials.len()
@@ -251,7 +251,7 @@ mod tests {
         let error = fixture
             .run("reflect", &[HostValue::Int(3)], 0, &[surfaces.view()])
             .unwrap_err();
-        assert!(error.0.contains("material 99"), "{}", error.0);
+        assert!(error.message.contains("material 99"), "{}", error.message);
         let out = fixture
             .run("reflect", &[HostValue::Int(1)], 0, &[surfaces.view()])
             .unwrap();

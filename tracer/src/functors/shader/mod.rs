@@ -141,7 +141,7 @@ impl Functor for Shader {
         if let Some(index) =
             (0..len).find(|&i| hits[i] && material_ids[i] as usize >= materials.len())
         {
-            return Err(FunctorError(format!(
+            return Err(FunctorError::bad_input(format!(
                 "shader: surface has material {}, but the scene has {} materials",
                 material_ids[index],
                 materials.len()
@@ -611,6 +611,6 @@ mod tests {
                 &[surfaces.view(), occlusion.view(), visible.view()],
             )
             .unwrap_err();
-        assert!(error.0.contains("material 3"), "{error}");
+        assert!(error.message.contains("material 3"), "{error}");
     }
 }

@@ -77,7 +77,7 @@ impl Functor for ShadowRay {
         let lights = ctx.resources::<TraceResources>()?.shading.lights();
         let lanes = ctx.group;
         if lanes != lights.len() {
-            return Err(FunctorError(format!(
+            return Err(FunctorError::bad_input(format!(
                 "shadowRay: fanout {lanes}, but the scene has {} lights; use fanout: scene.lights",
                 lights.len()
             )));
@@ -213,6 +213,6 @@ mod tests {
         let error = fixture
             .run_grouped("shadowRay", &[], 3, 0, &[surfaces.view()])
             .unwrap_err();
-        assert!(error.0.contains("2 lights"), "{error}");
+        assert!(error.message.contains("2 lights"), "{error}");
     }
 }

@@ -122,7 +122,7 @@ impl Functor for SurfaceFunctor {
         let names_no_triangle =
             |index: usize| live_prim(index).is_some_and(|prim| prim >= triangles.len());
         if let Some(index) = (0..len).find(|&index| names_no_triangle(index)) {
-            return Err(FunctorError(format!(
+            return Err(FunctorError::bad_input(format!(
                 "surface: hit names triangle {}, but the scene has {} triangles",
                 prims[index],
                 triangles.len()
@@ -380,6 +380,6 @@ mod tests {
         let error = fixture
             .run("surface", &[], 0, &[rays.view(), hit.view()])
             .unwrap_err();
-        assert!(error.0.contains("triangle 5"), "{error}");
+        assert!(error.message.contains("triangle 5"), "{error}");
     }
 }

@@ -64,7 +64,7 @@ impl Functor for VisibleLights {
     ) -> Result<(), FunctorError> {
         let lights = ctx.group;
         if lights == 0 || lights > MAX_LIGHTS {
-            return Err(FunctorError(format!(
+            return Err(FunctorError::bad_input(format!(
                 "visibleLights: group {lights}; a mask holds 1 to {MAX_LIGHTS} lights"
             )));
         }
@@ -114,6 +114,6 @@ mod tests {
         let error = fixture
             .run_grouped("visibleLights", &[], 33, 0, &[blocked.view()])
             .unwrap_err();
-        assert!(error.0.contains("32"), "{error}");
+        assert!(error.message.contains("32"), "{error}");
     }
 }

@@ -1419,7 +1419,9 @@ fn check(gpu: &GpuContext, case: &Case<'_>, stats: &mut Stats) -> Result<(), Str
         case.functor, case.what, env.name, case.named, case.group
     );
     match (case.expect, cpu, on_gpu) {
-        (Expect::Fail(text), Err(cpu), Err(gpu)) if cpu.0.contains(text) && gpu.contains(text) => {
+        (Expect::Fail(text), Err(cpu), Err(gpu))
+            if cpu.message.contains(text) && gpu.contains(text) =>
+        {
             Ok(())
         }
         (Expect::Fail(text), cpu, gpu) => Err(format!(

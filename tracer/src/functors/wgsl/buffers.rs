@@ -227,7 +227,7 @@ impl VolumeGpuBuffers {
         let dims = volume.dims;
         let samples = dims.x as u64 * dims.y as u64 * dims.z as u64;
         if volume.values.len() as u64 != samples {
-            return Err(FunctorError(format!(
+            return Err(FunctorError::bad_input(format!(
                 "the volume has {} values for {}×{}×{} samples",
                 volume.values.len(),
                 dims.x,
@@ -239,7 +239,7 @@ impl VolumeGpuBuffers {
             .ok()
             .filter(|_| samples <= u32::MAX as u64);
         let Some(cells) = cells else {
-            return Err(FunctorError(format!(
+            return Err(FunctorError::bad_input(format!(
                 "a {}×{}×{} volume has too many samples for the GPU's 32-bit indices",
                 dims.x, dims.y, dims.z
             )));

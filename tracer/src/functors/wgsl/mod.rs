@@ -230,7 +230,7 @@ pub(crate) fn request_resources<'a, T: Any>(
     functor: &str,
 ) -> Result<&'a T, FunctorError> {
     request.resources.downcast_ref::<T>().ok_or_else(|| {
-        FunctorError(format!(
+        FunctorError::bad_input(format!(
             "{functor}: the WGSL twin needs {} but the run has none (no scene loaded?)",
             std::any::type_name::<T>()
         ))
@@ -272,7 +272,7 @@ pub(crate) fn twin(
     if exact(&signature.inputs) != asked(request.inputs)
         || exact(&signature.outputs) != asked(request.outputs)
     {
-        return Err(FunctorError(format!(
+        return Err(FunctorError::bad_input(format!(
             "internal error: the WGSL twin of `{}` was asked for inputs {:?} and outputs {:?}",
             signature.name, request.inputs, request.outputs
         )));

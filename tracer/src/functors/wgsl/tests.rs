@@ -377,7 +377,11 @@ fn volume_and_table_buffers_hold_the_cpu_data() {
     let bad = VolumeResources {
         volume: Arc::new(bad),
     };
-    assert!(bad.gpu_buffers().unwrap_err().0.contains("values for"));
+    assert!(bad
+        .gpu_buffers()
+        .unwrap_err()
+        .message
+        .contains("values for"));
 
     let tables_buffers = MarchingCubesGpuBuffers::get();
     let tables = tables();
