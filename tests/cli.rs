@@ -358,12 +358,12 @@ fn exit_statuses_and_messages() {
         &["unknown view `side`"],
     );
     check(&["run", "missing.dpp"], &[], 2, &["missing.dpp"]);
-    // Run-time failures: status 1.
+    // Bad data found only while running is still bad input: status 2.
     let out_of_range = "pipeline p {\n    out xs = gather(fill(3, 7), iota(2))\n}\n";
     check(
         &["run", "oob.dpp"],
         &[("oob.dpp", out_of_range)],
-        1,
+        2,
         &["index 7", "out of range"],
     );
     check(
