@@ -11,10 +11,7 @@
 use crate::functors::wgsl::{f32_literal, twin, vector_module, TwinParts};
 use crate::shading::encode_srgb_in_place;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
-use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    Signature, TypePattern,
-};
+use dpp_runtime::{CallContext, Column, ColumnView, ElemType, Functor, FunctorError, Signature};
 use glam::Vec3;
 
 pub struct AntiAlias {
@@ -25,20 +22,10 @@ impl AntiAlias {
     #[allow(clippy::new_without_default)]
     pub fn new() -> AntiAlias {
         AntiAlias {
-            signature: Signature {
-                name: "antiAlias",
-                kind: FunctorKind::Group,
-                inputs: vec![ArrayParam {
-                    name: "color",
-                    ty: TypePattern::Exact(ElemType::Vec3),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "pixel",
-                    ty: TypePattern::Exact(ElemType::Vec3),
-                }],
-                named: vec![],
-                doc: "mean of each group of k linear colours (group: spp, 1 allowed), clamped to [0, 1] and sRGB-encoded for display",
-            },
+            signature: Signature::group("antiAlias")
+                .input("color", ElemType::Vec3)
+                .output("pixel", ElemType::Vec3)
+                .doc("mean of each group of k linear colours (group: spp, 1 allowed), clamped to [0, 1] and sRGB-encoded for display"),
         }
     }
 }

@@ -5,10 +5,7 @@
 use crate::functors::isosurface::tables::tables;
 use crate::functors::wgsl::{marching_cubes_module, twin, TwinParts};
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
-use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    Signature, TypePattern,
-};
+use dpp_runtime::{CallContext, Column, ColumnView, ElemType, Functor, FunctorError, Signature};
 
 pub struct CaseTriangles {
     signature: Signature,
@@ -17,20 +14,10 @@ pub struct CaseTriangles {
 impl CaseTriangles {
     pub fn new() -> CaseTriangles {
         CaseTriangles {
-            signature: Signature {
-                name: "caseTriangles",
-                kind: FunctorKind::Map,
-                inputs: vec![ArrayParam {
-                    name: "case",
-                    ty: TypePattern::Exact(ElemType::U32),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "count",
-                    ty: TypePattern::Exact(ElemType::U32),
-                }],
-                named: vec![],
-                doc: "the number of marching-cubes triangles (0..5) of a cell case",
-            },
+            signature: Signature::map("caseTriangles")
+                .input("case", ElemType::U32)
+                .output("count", ElemType::U32)
+                .doc("the number of marching-cubes triangles (0..5) of a cell case"),
         }
     }
 }

@@ -21,8 +21,7 @@ use crate::functors::wgsl::{
 };
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    HostType, NamedParam, RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, RecordId, Signature,
 };
 
 pub struct CubeTriangle {
@@ -32,31 +31,12 @@ pub struct CubeTriangle {
 impl CubeTriangle {
     pub fn new(triangle: RecordId) -> CubeTriangle {
         CubeTriangle {
-            signature: Signature {
-                name: "cubeTriangle",
-                kind: FunctorKind::Map,
-                inputs: vec![
-                    ArrayParam {
-                        name: "cell",
-                        ty: TypePattern::Exact(ElemType::U32),
-                    },
-                    ArrayParam {
-                        name: "lane",
-                        ty: TypePattern::Exact(ElemType::U32),
-                    },
-                ],
-                outputs: vec![ArrayParam {
-                    name: "tri",
-                    ty: TypePattern::Exact(ElemType::Record(triangle)),
-                }],
-                named: vec![NamedParam {
-                    name: "level",
-                    ty: HostType::Float,
-                    default: None,
-                    doc: "the isovalue (the same as cubeCase's)",
-                }],
-                doc: "triangle `lane` of a volume cell's marching-cubes surface at level: corners on the cell edges, gradient normals, interpolated scalars",
-            },
+            signature: Signature::map("cubeTriangle")
+                .input("cell", ElemType::U32)
+                .input("lane", ElemType::U32)
+                .output("tri", ElemType::Record(triangle))
+                .named("level", HostType::Float, None, "the isovalue (the same as cubeCase's)")
+                .doc("triangle `lane` of a volume cell's marching-cubes surface at level: corners on the cell edges, gradient normals, interpolated scalars"),
         }
     }
 }

@@ -21,8 +21,8 @@ use crate::functors::{
 };
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, HostValue,
+    RecordId, Signature,
 };
 use glam::Vec3;
 use std::f32::consts::TAU;
@@ -34,25 +34,16 @@ pub struct OccRayGen {
 impl OccRayGen {
     pub fn new(surface: RecordId, ray: RecordId) -> OccRayGen {
         OccRayGen {
-            signature: Signature {
-                name: "occRayGen",
-                kind: FunctorKind::Expand,
-                inputs: vec![ArrayParam {
-                    name: "surf",
-                    ty: TypePattern::Exact(ElemType::Record(surface)),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "ray",
-                    ty: TypePattern::Exact(ElemType::Record(ray)),
-                }],
-                named: vec![NamedParam {
-                    name: "range",
-                    ty: HostType::Float,
-                    default: Some(HostValue::Float(0.05)),
-                    doc: "length of the occlusion rays as a fraction of the scene diagonal",
-                }],
-                doc: "lane j: a cosine-weighted hemisphere ray about the normal, hashed from (sample, depth, j); dead for a miss",
-            },
+            signature: Signature::expand("occRayGen")
+                .input("surf", ElemType::Record(surface))
+                .output("ray", ElemType::Record(ray))
+                .named(
+                    "range",
+                    HostType::Float,
+                    Some(HostValue::Float(0.05)),
+                    "length of the occlusion rays as a fraction of the scene diagonal",
+                )
+                .doc("lane j: a cosine-weighted hemisphere ray about the normal, hashed from (sample, depth, j); dead for a miss"),
         }
     }
 }

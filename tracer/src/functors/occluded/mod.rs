@@ -9,8 +9,7 @@ use crate::functors::RayColumns;
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
 
 pub struct Occluded {
@@ -20,20 +19,10 @@ pub struct Occluded {
 impl Occluded {
     pub fn new(ray: RecordId) -> Occluded {
         Occluded {
-            signature: Signature {
-                name: "occluded",
-                kind: FunctorKind::Map,
-                inputs: vec![ArrayParam {
-                    name: "ray",
-                    ty: TypePattern::Exact(ElemType::Record(ray)),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "blocked",
-                    ty: TypePattern::Exact(ElemType::Bool),
-                }],
-                named: vec![],
-                doc: "whether any triangle lies on the ray with 0 < t < tmax",
-            },
+            signature: Signature::map("occluded")
+                .input("ray", ElemType::Record(ray))
+                .output("blocked", ElemType::Bool)
+                .doc("whether any triangle lies on the ray with 0 < t < tmax"),
         }
     }
 }

@@ -17,8 +17,8 @@ use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURF
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, HostValue,
+    RecordId, Signature,
 };
 use glam::Vec3;
 
@@ -29,25 +29,16 @@ pub struct Reflect {
 impl Reflect {
     pub fn new(surface: RecordId, ray: RecordId) -> Reflect {
         Reflect {
-            signature: Signature {
-                name: "reflect",
-                kind: FunctorKind::Map,
-                inputs: vec![ArrayParam {
-                    name: "surf",
-                    ty: TypePattern::Exact(ElemType::Record(surface)),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "ray",
-                    ty: TypePattern::Exact(ElemType::Record(ray)),
-                }],
-                named: vec![NamedParam {
-                    name: "maxDepth",
-                    ty: HostType::Int,
-                    default: Some(HostValue::Int(3)),
-                    doc: "ray segments per camera ray: a reflection of depth >= maxDepth is dead",
-                }],
-                doc: "mirror reflection of a reflective hit (weight * reflectivity, depth + 1); dead otherwise or at maxDepth",
-            },
+            signature: Signature::map("reflect")
+                .input("surf", ElemType::Record(surface))
+                .output("ray", ElemType::Record(ray))
+                .named(
+                    "maxDepth",
+                    HostType::Int,
+                    Some(HostValue::Int(3)),
+                    "ray segments per camera ray: a reflection of depth >= maxDepth is dead",
+                )
+                .doc("mirror reflection of a reflective hit (weight * reflectivity, depth + 1); dead otherwise or at maxDepth"),
         }
     }
 }

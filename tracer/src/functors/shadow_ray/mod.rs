@@ -16,8 +16,7 @@ use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURF
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
 
 pub struct ShadowRay {
@@ -27,20 +26,10 @@ pub struct ShadowRay {
 impl ShadowRay {
     pub fn new(surface: RecordId, ray: RecordId) -> ShadowRay {
         ShadowRay {
-            signature: Signature {
-                name: "shadowRay",
-                kind: FunctorKind::Expand,
-                inputs: vec![ArrayParam {
-                    name: "surf",
-                    ty: TypePattern::Exact(ElemType::Record(surface)),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "ray",
-                    ty: TypePattern::Exact(ElemType::Record(ray)),
-                }],
-                named: vec![],
-                doc: "lane j: the ray from the surface point to light j (fanout: scene.lights); dead for a miss or a light behind the surface",
-            },
+            signature: Signature::expand("shadowRay")
+                .input("surf", ElemType::Record(surface))
+                .output("ray", ElemType::Record(ray))
+                .doc("lane j: the ray from the surface point to light j (fanout: scene.lights); dead for a miss or a light behind the surface"),
         }
     }
 }
