@@ -5,7 +5,6 @@
 //! functors and the GPU backend's read-back all use it.
 
 use crate::column::{Column, ColumnView};
-use crate::functor::FunctorError;
 use crate::host::HostValue;
 use crate::monoid::{monoid_name, MonoidOp};
 use crate::types::ElemType;
@@ -34,13 +33,6 @@ pub enum KernelError {
     UnsupportedOperation { op: MonoidOp, ty: ElemType },
     #[error("a group needs at least one element")]
     EmptyGroup,
-}
-
-// Functors call kernels for their per-chunk work and report kernel errors as their own.
-impl From<KernelError> for FunctorError {
-    fn from(error: KernelError) -> FunctorError {
-        FunctorError(error.to_string())
-    }
 }
 
 /// One element of a primitive type: a reduction's partial result, a scan's

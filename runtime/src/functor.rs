@@ -5,6 +5,7 @@
 //! for the CPU backend.
 
 use crate::column::{Column, ColumnView};
+use crate::elem::KernelError;
 use crate::host::{HostValue, UniformSchema, Uniforms};
 use crate::signature::Signature;
 use crate::types::RecordRegistry;
@@ -56,6 +57,13 @@ impl fmt::Display for FunctorError {
 }
 
 impl std::error::Error for FunctorError {}
+
+// Functors call kernels for their per-chunk work and report kernel errors as their own.
+impl From<KernelError> for FunctorError {
+    fn from(error: KernelError) -> FunctorError {
+        FunctorError(error.to_string())
+    }
+}
 
 /// The error a functor without a twin gives the GPU backend.
 pub fn no_twin(name: &str) -> FunctorError {

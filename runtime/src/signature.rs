@@ -1,7 +1,7 @@
 //! Signatures: what the plan compiler and the backends know of a functor's
 //! shape (kind, array inputs and outputs, named arguments), apart from the
-//! [`Functor`](crate::Functor) trait that runs it, so that the WGSL contract
-//! ([`crate::wgsl`]) can read signatures without depending on functors.
+//! `Functor` trait that runs it, so that the WGSL contract (`wgsl.rs`) can
+//! read signatures without depending on functors.
 
 use crate::host::HostValue;
 use crate::monoid::MonoidOp;
