@@ -1,9 +1,9 @@
 //! `caseTriangles(case: u32) -> (count: u32)`: how many triangles marching
 //! cubes makes in a cell of this case (0 to 5), from the generated tables
-//! ([`crate::functors::isosurface::tables`]).
+//! ([`crate::marching_cubes_tables`]).
 
-use crate::functors::isosurface::tables::tables;
 use crate::functors::wgsl::{marching_cubes_module, twin, TwinParts};
+use crate::marching_cubes_tables::tables;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{CallContext, Column, ColumnView, ElemType, Functor, FunctorError, Signature};
 

@@ -10,7 +10,6 @@
 //! corners wind counter-clockwise seen from the side of higher values. See
 //! [`crate::functors::isosurface`] for the conventions.
 
-use crate::functors::isosurface::tables::tables;
 use crate::functors::isosurface::VolumeResources;
 use crate::functors::isosurface::{
     case_index, cell_origin, corner_values, edge_vertex, level, run_volume, TriangleRecord,
@@ -19,6 +18,7 @@ use crate::functors::isosurface::{
 use crate::functors::wgsl::{
     marching_cubes_module, request_resources, twin, vector_module, volume_module, TwinParts,
 };
+use crate::marching_cubes_tables::tables;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, RecordId, Signature,

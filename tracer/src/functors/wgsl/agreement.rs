@@ -10,12 +10,13 @@
 //! tolerance. Run with `--nocapture` for the largest differences measured.
 
 use crate::camera::{Camera, CameraSetup};
-use crate::functors::isosurface::{register_isosurface_functors, volume_uniforms, VolumeResources};
+use crate::functors::isosurface::{volume_uniforms, VolumeResources};
 use crate::functors::test_support::{
     hit_column, ray, ray_column, read_surfaces, surface_column, Fixture,
 };
 use crate::functors::{RayRecord, SurfaceRecord};
 use crate::mesh::TriangleMesh;
+use crate::register_isosurface_functors;
 use crate::scene::TraceScene;
 use crate::shading::{Material, MeshMaterials, PointLight};
 use crate::volume::Volume;

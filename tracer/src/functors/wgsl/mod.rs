@@ -13,8 +13,8 @@
 pub mod buffers;
 
 use crate::bvh::Bvh;
-use crate::functors::isosurface::tables::MAX_CELL_TRIANGLES;
 use crate::functors::SURFACE_EPSILON;
+use crate::marching_cubes_tables::MAX_CELL_TRIANGLES;
 use buffers::{MarchingCubesGpuBuffers, SceneGpuBuffers, ShadingGpuBuffers, VolumeGpuBuffers};
 use dpp_runtime::wgsl::{GpuBuffer, WgslModule, WgslRequest, WgslTwin};
 use dpp_runtime::{FunctorError, Signature, TypePattern};
@@ -278,7 +278,7 @@ pub(crate) fn twin(
         )));
     }
     // Memory of a volume no run holds any more goes at the next twin built.
-    crate::functors::isosurface::release_gpu_buffers_of_dropped_volumes();
+    buffers::release_gpu_buffers_of_dropped_volumes();
     let mut values = parts.constants;
     values.push(("FUNCTION", request.function.to_string()));
     let mut modules: Vec<WgslModule> = Vec::new();
