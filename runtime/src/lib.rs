@@ -6,6 +6,7 @@ pub mod elem;
 pub mod functor;
 pub mod host;
 pub mod monoid;
+pub mod random;
 pub mod signature;
 pub mod types;
 

@@ -12,7 +12,6 @@ pub mod mesh_write;
 pub mod obj;
 pub mod ply;
 mod prefetch;
-mod random;
 pub mod scene;
 pub mod shading;
 #[cfg(test)]
