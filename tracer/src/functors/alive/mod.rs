@@ -31,10 +31,8 @@ impl Functor for Alive {
     /// `twin.wgsl`: `tmax > 0` on the bits.
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module()],
-            buffers: Vec::new(),
-            failures: Vec::new(),
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

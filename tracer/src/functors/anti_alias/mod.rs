@@ -43,8 +43,8 @@ impl Functor for AntiAlias {
                 ("SRGB_EXPONENT", f32_literal(1.0 / 2.4)),
             ],
             modules: vec![vector_module()],
-            buffers: Vec::new(),
             failures: vec!["antiAlias: group must be at least 1".into()],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -48,7 +48,6 @@ impl Functor for CameraRay {
         let camera =
             request_resources::<TraceResources>(request, "cameraRay")?.camera_gpu_buffers();
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module()],
             buffers: vec![camera.camera, camera.morton_pixels],
             failures: vec![
@@ -56,6 +55,7 @@ impl Functor for CameraRay {
                 "cameraRay: a ray index is out of range for the camera's pixels x spp samples"
                     .into(),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -36,10 +36,9 @@ impl Functor for CaseTriangles {
     /// `twin.wgsl`, reading the generated tables.
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![marching_cubes_module()],
-            buffers: Vec::new(),
             failures: vec!["caseTriangles: a case is not a marching-cubes case (0..255)".into()],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -44,13 +44,12 @@ impl Functor for CubeCase {
             .gpu_buffers()
             .map_err(|e| FunctorError(format!("cubeCase: {e}")))?;
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module(), volume_module(&volume)],
-            buffers: Vec::new(),
             failures: vec![
                 "cubeCase: level must be a finite number".into(),
                 "cubeCase: a cell index is past the volume's last cell".into(),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

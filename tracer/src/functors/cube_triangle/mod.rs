@@ -52,18 +52,17 @@ impl Functor for CubeTriangle {
             .gpu_buffers()
             .map_err(|e| FunctorError(format!("cubeTriangle: {e}")))?;
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![
                 vector_module(),
                 volume_module(&volume),
                 marching_cubes_module(),
             ],
-            buffers: Vec::new(),
             failures: vec![
                 "cubeTriangle: level must be a finite number".into(),
                 "cubeTriangle: a cell index is past the volume's last cell".into(),
                 "cubeTriangle: a lane is past the cell's triangles at this level".into(),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

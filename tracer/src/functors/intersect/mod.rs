@@ -42,8 +42,8 @@ impl Functor for Intersect {
         let parts = TwinParts {
             constants: vec![("MISS_PRIM", format!("{MISS_PRIM}u"))],
             modules: vec![vector_module(), bvh_module(scene.gpu_buffers())],
-            buffers: Vec::new(),
             failures: vec![stack_overflow_failure("intersect")],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

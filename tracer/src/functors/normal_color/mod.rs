@@ -48,8 +48,8 @@ impl Functor for NormalColor {
                 ("BACKGROUND", vec3_literal(BACKGROUND)),
             ],
             modules: vec![vector_module(), mesh_module(scene.gpu_buffers())],
-            buffers: Vec::new(),
             failures: vec!["normalColor: a hit names a triangle the scene does not have".into()],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -14,7 +14,8 @@
 //! rays, which `occluded` reports as not blocked.
 
 use crate::functors::wgsl::{
-    random_module, sampling_module, surface_module, twin, vector_module, TwinParts,
+    diagonal_failure, random_module, sampling_module, surface_module, twin, vector_module,
+    TwinParts,
 };
 use crate::functors::{
     named_f32, scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON,
@@ -56,19 +57,17 @@ impl Functor for OccRayGen {
     /// `twin.wgsl`: the same hashed random numbers and hemisphere mapping.
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![
                 vector_module(),
                 random_module(),
                 sampling_module(),
                 surface_module(),
             ],
-            buffers: Vec::new(),
             failures: vec![
                 "occRayGen: range must be a finite number".into(),
-                "occRayGen: the scene.diagonal uniform is not a positive number (no scene loaded?)"
-                    .into(),
+                diagonal_failure("occRayGen"),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -36,10 +36,9 @@ impl Functor for Occluded {
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let scene = &request_resources::<TraceResources>(request, "occluded")?.scene;
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module(), bvh_module(scene.gpu_buffers())],
-            buffers: Vec::new(),
             failures: vec![stack_overflow_failure("occluded")],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

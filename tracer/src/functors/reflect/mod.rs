@@ -12,7 +12,9 @@
 //! 0`, zero weight), so with `maxDepth` the pipeline traces at most `maxDepth`
 //! segments per camera ray (the camera ray included).
 
-use crate::functors::wgsl::{request_resources, surface_module, twin, vector_module, TwinParts};
+use crate::functors::wgsl::{
+    diagonal_failure, request_resources, surface_module, twin, vector_module, TwinParts,
+};
 use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
@@ -53,14 +55,13 @@ impl Functor for Reflect {
         let shading =
             request_resources::<TraceResources>(request, "reflect")?.shading_gpu_buffers();
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module(), surface_module()],
             buffers: vec![shading.materials],
             failures: vec![
-                "reflect: the scene.diagonal uniform is not a positive number (no scene loaded?)"
-                    .into(),
+                diagonal_failure("reflect"),
                 "reflect: a surface has a material the scene does not have".into(),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -19,7 +19,8 @@
 //!   `surf.weight`.
 
 use crate::functors::wgsl::{
-    colormap_module, request_resources, surface_module, twin, vector_module, TwinParts,
+    colormap_module, diagonal_failure, request_resources, surface_module, twin, vector_module,
+    TwinParts,
 };
 use crate::functors::{named_f32, scene_diagonal, SurfaceColumns};
 use crate::scene::TraceResources;
@@ -75,8 +76,7 @@ impl Functor for Shader {
             failures: vec![
                 "shader: ambient must be a finite number".into(),
                 "shader: falloff must be a finite number".into(),
-                "shader: the scene.diagonal uniform is not a positive number (no scene loaded?)"
-                    .into(),
+                diagonal_failure("shader"),
                 "shader: a surface has a material the scene does not have".into(),
             ],
         };

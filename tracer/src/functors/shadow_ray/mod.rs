@@ -11,7 +11,9 @@
 //! the shader does not light anyway), gives a dead ray (`tmax = 0`), which
 //! `occluded` reports as not blocked.
 
-use crate::functors::wgsl::{request_resources, surface_module, twin, vector_module, TwinParts};
+use crate::functors::wgsl::{
+    diagonal_failure, request_resources, surface_module, twin, vector_module, TwinParts,
+};
 use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
@@ -44,15 +46,14 @@ impl Functor for ShadowRay {
         let shading =
             request_resources::<TraceResources>(request, "shadowRay")?.shading_gpu_buffers();
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module(), surface_module()],
             buffers: vec![shading.lights],
             failures: vec![
                 "shadowRay: the fanout is not the scene's number of lights; use fanout: scene.lights"
                     .into(),
-                "shadowRay: the scene.diagonal uniform is not a positive number (no scene loaded?)"
-                    .into(),
+                diagonal_failure("shadowRay"),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

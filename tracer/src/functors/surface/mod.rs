@@ -70,8 +70,8 @@ impl Functor for SurfaceFunctor {
                 ("MIN_VIEW_SINE", f32_literal(min_view_sine)),
             ],
             modules: vec![vector_module(), mesh_module(scene.gpu_buffers())],
-            buffers: Vec::new(),
             failures: vec!["surface: a hit names a triangle the scene does not have".into()],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -34,11 +34,10 @@ impl Functor for VisibleLights {
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let parts = TwinParts {
             constants: vec![("MAX_LIGHTS", format!("{MAX_LIGHTS}u"))],
-            modules: Vec::new(),
-            buffers: Vec::new(),
             failures: vec![format!(
                 "visibleLights: the group must be 1 to {MAX_LIGHTS} lights (a mask holds {MAX_LIGHTS})"
             )],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

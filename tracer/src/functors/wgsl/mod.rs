@@ -48,6 +48,11 @@ pub(crate) fn stack_overflow_failure(functor: &str) -> String {
     )
 }
 
+/// The failure of a twin that found no positive `scene.diagonal` uniform.
+pub(crate) fn diagonal_failure(functor: &str) -> String {
+    format!("{functor}: the scene.diagonal uniform is not a positive number (no scene loaded?)")
+}
+
 /// `template` with each `$NAME` of `values` replaced (longest names first, so
 /// that one name may start another). Every `$` must be replaced.
 pub(crate) fn instantiate(template: &str, values: &[(&str, String)]) -> String {
@@ -237,7 +242,9 @@ pub(crate) fn request_resources<'a, T: Any>(
     })
 }
 
-/// What a functor's twin is made of besides its template.
+/// What a functor's twin is made of besides its template (the parts a twin
+/// does not need left at their empty defaults).
+#[derive(Default)]
 pub(crate) struct TwinParts<'a> {
     /// `$NAME` values besides `$FUNCTION`.
     pub constants: Vec<(&'a str, String)>,
