@@ -604,8 +604,8 @@ fn iso(args: IsoArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         .unwrap_or("")
         .to_ascii_lowercase();
     let written = match extension.as_str() {
-        "ply" => dpp_tracer::functors::isosurface::write_ply(&mesh, &args.output),
-        "obj" => dpp_tracer::functors::isosurface::write_obj(&mesh, &args.output),
+        "ply" => dpp_tracer::mesh_write::write_ply(&mesh, &args.output),
+        "obj" => dpp_tracer::mesh_write::write_obj(&mesh, &args.output),
         _ => {
             return Err(Failure::Input(format!(
                 "error: cannot write `{}`: use a .ply or .obj file name",

@@ -6,9 +6,9 @@ use crate::exec::{run_plan_gpu_with_inputs, GpuRunContext};
 use dpp_dsl::Span;
 use dpp_runtime::column::Column;
 use dpp_runtime::compile::ir::*;
-use dpp_runtime::functor::{FunctorKind, TypePattern};
 use dpp_runtime::host::HostValue;
 use dpp_runtime::interpret::{OutputValue, RunError};
+use dpp_runtime::signature::{FunctorKind, TypePattern};
 use dpp_runtime::types::ElemType;
 
 /// `map<name>(inputs…)`, `gather<name>(inputs[0], group: k)` or

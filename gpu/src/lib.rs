@@ -4,6 +4,7 @@
 //! not rely on forward progress between workgroups. The shared interpreter
 //! (`dpp_runtime::interpret`) drives it, so control flow is the CPU's.
 
+pub mod agreement;
 pub mod array;
 mod device;
 mod exec;

@@ -2,8 +2,8 @@
 //! prelude and a kernel that calls it as the backend would, so that a
 //! functor's own tests catch a broken twin on any machine.
 
-use dpp_runtime::functor::{FunctorKind, Signature};
 use dpp_runtime::host::UniformSchema;
+use dpp_runtime::signature::{FunctorKind, Signature};
 use dpp_runtime::wgsl::{
     collect_dependencies, elem_type_wgsl, host_type_wgsl, record_structs, twin_parameters,
     WgslRequest, WgslTwin,

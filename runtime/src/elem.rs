@@ -6,7 +6,6 @@
 
 use crate::column::{Column, ColumnView};
 use crate::error::ErrorKind;
-use crate::functor::FunctorError;
 use crate::host::HostValue;
 use crate::monoid::{monoid_name, MonoidOp};
 use crate::types::ElemType;
@@ -35,13 +34,6 @@ pub enum KernelError {
     UnsupportedOperation { op: MonoidOp, ty: ElemType },
     #[error("a group needs at least one element")]
     EmptyGroup,
-}
-
-// Functors call kernels for their per-chunk work and report kernel errors as their own.
-impl From<KernelError> for FunctorError {
-    fn from(error: KernelError) -> FunctorError {
-        FunctorError::new(error.kind(), error.to_string())
-    }
 }
 
 impl KernelError {

@@ -1,155 +1,20 @@
 //! Functors: named, typed per-element kernels, and the library that holds them.
 //!
 //! The runtime knows functors only through [`Functor`]: a [`Signature`] for the
-//! plan compiler and a chunk-wise CPU implementation for the CPU backend.
+//! plan compiler (see [`crate::signature`]) and a chunk-wise CPU implementation
+//! for the CPU backend.
 
 use crate::column::{Column, ColumnView};
+use crate::elem::KernelError;
 use crate::error::ErrorKind;
 use crate::host::{HostValue, UniformSchema, Uniforms};
-use crate::monoid::MonoidOp;
-use crate::types::{ElemType, HostType, RecordRegistry};
+use crate::signature::Signature;
+use crate::types::RecordRegistry;
 use crate::wgsl::{WgslRequest, WgslTwin};
 use std::any::Any;
 use std::collections::BTreeMap;
 use std::fmt;
 use std::sync::Arc;
-
-/// What shape of element function a functor is, which decides the primitives it may appear in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FunctorKind {
-    /// One element of each input to one element of each output: `map<f>`.
-    Map,
-    /// `k` consecutive elements of one input to one output element: `gather<f>(src, group: k)`.
-    Group,
-    /// One input element and a lane `j < k` to one output element: `scatter<f>(src, fanout: k)`.
-    /// The CPU implementation receives the source elements and writes `k` outputs for each.
-    Expand,
-    /// An associative, commutative binary operation with an identity: usable in
-    /// `map`, `reduce`, `scan` and combining `scatter`.
-    Monoid(MonoidOp),
-}
-
-/// A type in a signature: concrete, or a variable bound at each call.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TypePattern {
-    Exact(ElemType),
-    /// Type variable number `n` (`T0`, `T1`, …), limited by a constraint.
-    Var(u8, TypeConstraint),
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TypeConstraint {
-    /// Any element type, records included.
-    Any,
-    /// `u32`, `i32`, `f32`, `vec2`, `vec3`, `vec4`.
-    Numeric,
-    /// `u32`, `i32`, `f32`.
-    Scalar,
-    /// `u32`, `i32`.
-    Integer,
-    /// `bool`, `u32`, `i32`, `f32`.
-    ScalarOrBool,
-    /// Every primitive element type (no records).
-    Primitive,
-}
-
-impl TypeConstraint {
-    pub fn admits(self, ty: ElemType) -> bool {
-        match self {
-            TypeConstraint::Any => true,
-            TypeConstraint::Numeric => ty.is_numeric(),
-            TypeConstraint::Scalar => matches!(ty, ElemType::U32 | ElemType::I32 | ElemType::F32),
-            TypeConstraint::Integer => ty.is_integer(),
-            TypeConstraint::ScalarOrBool => matches!(
-                ty,
-                ElemType::Bool | ElemType::U32 | ElemType::I32 | ElemType::F32
-            ),
-            TypeConstraint::Primitive => !matches!(ty, ElemType::Record(_)),
-        }
-    }
-
-    pub fn describe(self) -> &'static str {
-        match self {
-            TypeConstraint::Any => "any",
-            TypeConstraint::Numeric => "numeric",
-            TypeConstraint::Scalar => "u32|i32|f32",
-            TypeConstraint::Integer => "u32|i32",
-            TypeConstraint::ScalarOrBool => "bool|u32|i32|f32",
-            TypeConstraint::Primitive => "primitive",
-        }
-    }
-}
-
-#[derive(Clone, Debug, PartialEq)]
-pub struct ArrayParam {
-    pub name: &'static str,
-    pub ty: TypePattern,
-}
-
-/// A uniform argument a functor accepts as `name: value` (a host scalar).
-#[derive(Clone, Debug, PartialEq)]
-pub struct NamedParam {
-    pub name: &'static str,
-    pub ty: HostType,
-    /// `None` makes the argument required.
-    pub default: Option<HostValue>,
-    pub doc: &'static str,
-}
-
-#[derive(Clone, Debug, PartialEq)]
-pub struct Signature {
-    pub name: &'static str,
-    pub kind: FunctorKind,
-    /// Array inputs, in order. An `Expand` functor's lane index is not listed.
-    pub inputs: Vec<ArrayParam>,
-    pub outputs: Vec<ArrayParam>,
-    pub named: Vec<NamedParam>,
-    /// One line for `dpp functors`.
-    pub doc: &'static str,
-}
-
-impl Signature {
-    /// `name(a: T0, b: T0) -> T0 [k: float = 1.0]` with record names resolved.
-    pub fn display(&self, records: &RecordRegistry) -> String {
-        let pattern = |p: &TypePattern| match p {
-            TypePattern::Exact(t) => t.name(records),
-            TypePattern::Var(n, c) => match c {
-                TypeConstraint::Any => format!("T{n}"),
-                c => format!("T{n}:{}", c.describe()),
-            },
-        };
-        let inputs: Vec<String> = self
-            .inputs
-            .iter()
-            .map(|p| format!("{}: {}", p.name, pattern(&p.ty)))
-            .collect();
-        let outputs: Vec<String> = self
-            .outputs
-            .iter()
-            .map(|p| format!("{}: {}", p.name, pattern(&p.ty)))
-            .collect();
-        let kind = match self.kind {
-            FunctorKind::Map => "map".to_string(),
-            FunctorKind::Group => "group".to_string(),
-            FunctorKind::Expand => "expand".to_string(),
-            FunctorKind::Monoid(op) => format!("monoid {op:?}").to_lowercase(),
-        };
-        let mut text = format!(
-            "{:<12} {}({}) -> ({})",
-            kind,
-            self.name,
-            inputs.join(", "),
-            outputs.join(", ")
-        );
-        for n in &self.named {
-            match &n.default {
-                Some(d) => text.push_str(&format!(" [{}: {} = {}]", n.name, n.ty, d)),
-                None => text.push_str(&format!(" [{}: {}]", n.name, n.ty)),
-            }
-        }
-        text
-    }
-}
 
 /// Everything a functor's CPU implementation may read besides its array inputs.
 pub struct CallContext<'a> {
@@ -216,6 +81,20 @@ impl fmt::Display for FunctorError {
 
 impl std::error::Error for FunctorError {}
 
+// Functors call kernels for their per-chunk work and report kernel errors as their own.
+impl From<KernelError> for FunctorError {
+    fn from(error: KernelError) -> FunctorError {
+        FunctorError::new(error.kind(), error.to_string())
+    }
+}
+
+/// The error a functor without a twin gives the GPU backend.
+pub fn no_twin(name: &str) -> FunctorError {
+    FunctorError::bad_input(format!(
+        "functor `{name}` has no WGSL twin, so it cannot run on the GPU backend"
+    ))
+}
+
 pub trait Functor: Send + Sync {
     fn signature(&self) -> &Signature;
 
@@ -234,7 +113,7 @@ pub trait Functor: Send + Sync {
     /// The functor's WGSL twin for the GPU backend (conventions in [`crate::wgsl`]).
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let _ = request;
-        Err(crate::wgsl::no_twin(self.signature().name))
+        Err(no_twin(self.signature().name))
     }
 }
 

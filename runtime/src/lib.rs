@@ -7,16 +7,16 @@ pub mod error;
 pub mod functor;
 pub mod host;
 pub mod monoid;
+pub mod random;
+pub mod signature;
 pub mod types;
 
 pub use column::{Column, ColumnView};
 pub use error::ErrorKind;
-pub use functor::{
-    ArrayParam, CallContext, Functor, FunctorError, FunctorKind, FunctorLibrary, NamedParam,
-    Signature, TypeConstraint, TypePattern,
-};
+pub use functor::{CallContext, Functor, FunctorError, FunctorLibrary};
 pub use host::{HostValue, UniformSchema, Uniforms};
 pub use monoid::MonoidOp;
+pub use signature::{ArrayParam, FunctorKind, NamedParam, Signature, TypeConstraint, TypePattern};
 pub use types::{ElemType, HostType, RecordId, RecordRegistry, RecordType};
 
 pub mod compile;

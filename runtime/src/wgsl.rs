@@ -38,7 +38,7 @@
 //! that a functor's tests can check its twin without a GPU.
 
 use crate::elem::Element;
-use crate::functor::{FunctorError, FunctorKind, Signature};
+use crate::signature::{FunctorKind, Signature};
 use crate::types::{ElemType, HostType, RecordRegistry};
 use std::any::Any;
 use std::borrow::Cow;
@@ -220,11 +220,4 @@ pub fn twin_parameters(
         params.push((named.name.to_string(), host_type_wgsl(named.ty).to_string()));
     }
     params
-}
-
-/// The error a functor without a twin gives the GPU backend.
-pub fn no_twin(name: &str) -> FunctorError {
-    FunctorError::bad_input(format!(
-        "functor `{name}` has no WGSL twin, so it cannot run on the GPU backend"
-    ))
 }

@@ -41,19 +41,12 @@ impl Functor for Split {
 
 fn library() -> FunctorLibrary {
     let mut library = common::library();
-    let u32_param = |name| ArrayParam {
-        name,
-        ty: TypePattern::Exact(ElemType::U32),
-    };
     library.register(Arc::new(Split {
-        signature: Signature {
-            name: "split",
-            kind: FunctorKind::Map,
-            inputs: vec![u32_param("x")],
-            outputs: vec![u32_param("lo"), u32_param("hi")],
-            named: Vec::new(),
-            doc: "x % 4 and x / 4",
-        },
+        signature: Signature::map("split")
+            .input("x", ElemType::U32)
+            .output("lo", ElemType::U32)
+            .output("hi", ElemType::U32)
+            .doc("x % 4 and x / 4"),
     }));
     library
 }

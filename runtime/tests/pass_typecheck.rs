@@ -57,20 +57,10 @@ fn library() -> FunctorLibrary {
         doc: "a test record".into(),
     });
     library.register(Arc::new(MakePair {
-        signature: Signature {
-            name: "makePair",
-            kind: FunctorKind::Map,
-            inputs: vec![ArrayParam {
-                name: "x",
-                ty: TypePattern::Exact(ElemType::U32),
-            }],
-            outputs: vec![ArrayParam {
-                name: "pair",
-                ty: TypePattern::Exact(ElemType::Record(pair)),
-            }],
-            named: Vec::new(),
-            doc: "a Pair from x",
-        },
+        signature: Signature::map("makePair")
+            .input("x", ElemType::U32)
+            .output("pair", ElemType::Record(pair))
+            .doc("a Pair from x"),
     }));
     library.uniforms.declare("camera", "pixels", HostType::Int);
     library.uniforms.declare("camera", "fov", HostType::Float);

@@ -29,7 +29,7 @@
 //! surface does.
 
 use crate::mesh::TriangleMesh;
-use crate::random::SplitMix64;
+use dpp_runtime::random::SplitMix64;
 use fast_surface_nets::ndshape::RuntimeShape;
 use fast_surface_nets::{surface_nets, SurfaceNetsBuffer};
 use glam::Vec3;

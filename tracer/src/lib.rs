@@ -3,13 +3,15 @@
 
 pub mod builtin_scene;
 pub mod bvh;
+pub mod cache;
 pub mod camera;
 pub mod functors;
+pub mod marching_cubes_tables;
 pub mod mesh;
+pub mod mesh_write;
 pub mod obj;
 pub mod ply;
 mod prefetch;
-mod random;
 pub mod scene;
 pub mod shading;
 #[cfg(test)]
@@ -23,7 +25,7 @@ pub use mesh::TriangleMesh;
 pub use scene::{SceneError, TraceResources, TraceScene};
 pub use shading::{PointLight, SceneFile, Shading, ShadingError, ShadingOverrides};
 
-use dpp_runtime::{FunctorLibrary, HostType, HostValue, Uniforms};
+use dpp_runtime::{ElemType, FunctorLibrary, HostType, HostValue, RecordId, RecordType, Uniforms};
 use std::sync::Arc;
 
 /// The uniform fields the tracer fills, by record: `(record, field, type)`.
@@ -72,12 +74,36 @@ pub fn register_tracer_functors(library: &mut FunctorLibrary) -> TracerRecords {
     records
 }
 
+/// Registers the `Triangle` record, declares the `volume.*` uniforms and
+/// registers `cubeCase`, `caseTriangles` and `cubeTriangle`. Returns the
+/// `Triangle` record's id.
+pub fn register_isosurface_functors(library: &mut FunctorLibrary) -> RecordId {
+    let triangle = library.records.register(RecordType {
+        name: "Triangle".into(),
+        fields: ["a", "b", "c", "na", "nb", "nc"]
+            .iter()
+            .map(|name| (name.to_string(), ElemType::Vec3))
+            .chain(["sa", "sb", "sc"].iter().map(|name| (name.to_string(), ElemType::F32)))
+            .collect(),
+        doc: "an isosurface triangle: corners a, b, c (counter-clockwise seen from higher values), unit vertex normals na, nb, nc (up the gradient), vertex scalars sa, sb, sc".into(),
+    });
+    for (record, field, ty) in functors::isosurface::VOLUME_UNIFORM_FIELDS {
+        library.uniforms.declare(record, field, ty);
+    }
+    library.register(Arc::new(functors::cube_case::CubeCase::new()));
+    library.register(Arc::new(functors::case_triangles::CaseTriangles::new()));
+    library.register(Arc::new(functors::cube_triangle::CubeTriangle::new(
+        triangle,
+    )));
+    triangle
+}
+
 /// Every functor a pipeline may name: the runtime's generic ones and the tracer's.
 pub fn functor_library() -> FunctorLibrary {
     let mut library = FunctorLibrary::default();
     dpp_runtime::generic::register_generic_functors(&mut library);
     register_tracer_functors(&mut library);
-    functors::isosurface::register_isosurface_functors(&mut library);
+    register_isosurface_functors(&mut library);
     library
 }
 

@@ -638,7 +638,7 @@ end_header
         };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("iso.ply");
-        crate::functors::isosurface::write_ply(&mesh, &path).unwrap();
+        crate::mesh_write::write_ply(&mesh, &path).unwrap();
         assert_eq!(load_ply(&path).unwrap(), mesh);
     }
 

@@ -2,10 +2,9 @@
 
 use crate::builtin_scene::{builtin_scene, ResolutionOutOfRange};
 use crate::bvh::Bvh;
+use crate::cache::{ArcKeyedCache, BuiltOnce};
 use crate::camera::CameraSetup;
-use crate::functors::wgsl::buffers::{
-    ArcKeyedCache, BuiltOnce, CameraGpuBuffers, SceneGpuBuffers, ShadingGpuBuffers,
-};
+use crate::functors::wgsl::buffers::{CameraGpuBuffers, SceneGpuBuffers, ShadingGpuBuffers};
 use crate::mesh::{Bounds, MeshError, TriangleMesh};
 use crate::obj::{load_obj_with_materials, ObjError};
 use crate::shading::{MeshMaterials, Shading};
@@ -94,16 +93,27 @@ impl TraceScene {
     /// The material id of triangle `prim` (0 for an unknown triangle).
     #[inline]
     pub fn triangle_material(&self, prim: u32) -> u32 {
-        self.materials
-            .triangle_materials
-            .get(prim as usize)
-            .copied()
-            .unwrap_or(0)
+        self.materials.triangle_material(prim)
     }
 
     /// The mesh and BVH as the GPU twins read them, built once.
     pub fn gpu_buffers(&self) -> &SceneGpuBuffers {
-        self.gpu_buffers.get_or_init(|| SceneGpuBuffers::new(self))
+        self.gpu_buffers
+            .get_or_init(|| SceneGpuBuffers::new(&self.mesh, &self.bvh, &self.materials))
+    }
+}
+
+/// Defined here rather than in [`crate::shading`], which sits below scenes and
+/// knows only meshes' bounds, scalars and materials.
+impl Shading {
+    /// The defaults for a scene: [`Shading::for_mesh`] of its materials,
+    /// bounds and vertex scalars.
+    pub fn for_scene(scene: &TraceScene) -> Shading {
+        Shading::for_mesh(
+            &scene.materials,
+            &scene.bounds,
+            scene.mesh.scalars.as_deref().unwrap_or(&[]),
+        )
     }
 }
 
@@ -148,5 +158,39 @@ impl TraceResources {
     /// The uniforms of this scene, camera and shading (see [`crate::uniforms`]).
     pub fn uniforms(&self) -> dpp_runtime::Uniforms {
         crate::uniforms(&self.scene, &self.camera, &self.shading)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shading::{srgb_to_linear, Material, DEFAULT_BACKGROUND, DEFAULT_MATERIAL};
+
+    fn scene() -> TraceScene {
+        let mesh = TriangleMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(0.0, 2.0, 0.0)],
+            triangles: vec![[0, 1, 2]],
+            normals: None,
+            scalars: None,
+        };
+        TraceScene::new(mesh).unwrap()
+    }
+
+    #[test]
+    fn defaults_follow_the_scene() {
+        let scene = scene();
+        let shading = Shading::for_scene(&scene);
+        assert_eq!(shading.materials(), &[Material::named(DEFAULT_MATERIAL)]);
+        assert_eq!(shading.colormap().name(), "viridis");
+        // Scalars default to y.
+        assert_eq!(shading.scalar_range(), [0.0, 2.0]);
+        assert_eq!(shading.lights().len(), 2);
+        let c = scene.bounds.center();
+        let key = shading.lights()[0];
+        assert!(key.position.y > scene.bounds.max.y && key.position.z > c.z);
+        // The key light delivers 1.0 at the centre with falloff 1.
+        let d = (key.position - c).length() / scene.bounds.diagonal();
+        assert!((key.intensity / (1.0 + d * d) - 1.0).abs() < 1e-5);
+        assert!((shading.background() - srgb_to_linear(DEFAULT_BACKGROUND)).length() < 1e-6);
     }
 }

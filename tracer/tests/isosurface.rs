@@ -11,8 +11,9 @@ use dpp_runtime::cpu::exec::{run_plan, RunContext};
 use dpp_runtime::interpret::OutputValue;
 use dpp_runtime::{Column, HostValue};
 use dpp_tracer::functors::isosurface::{
-    triangles_to_mesh, volume_uniforms, write_obj, write_ply, TriangleColumns, VolumeResources,
+    triangles_to_mesh, volume_uniforms, TriangleColumns, VolumeResources,
 };
+use dpp_tracer::mesh_write::{write_obj, write_ply};
 use dpp_tracer::volume::generate::Dataset;
 use dpp_tracer::volume::Volume;
 use dpp_tracer::TriangleMesh;

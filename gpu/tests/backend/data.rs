@@ -160,24 +160,10 @@ impl Functor for DataFunctor {
 /// Registers `{name}(index: u32, column: int) -> ty`, which reads the run's [`Data`].
 pub fn register_data_functor(library: &mut FunctorLibrary, name: &'static str, ty: ElemType) {
     library.register(Arc::new(DataFunctor {
-        signature: Signature {
-            name,
-            kind: FunctorKind::Map,
-            inputs: vec![ArrayParam {
-                name: "index",
-                ty: TypePattern::Exact(ElemType::U32),
-            }],
-            outputs: vec![ArrayParam {
-                name: "value",
-                ty: TypePattern::Exact(ty),
-            }],
-            named: vec![NamedParam {
-                name: "column",
-                ty: HostType::Int,
-                default: None,
-                doc: "input column",
-            }],
-            doc: "test input",
-        },
+        signature: Signature::map(name)
+            .input("index", ElemType::U32)
+            .output("value", ty)
+            .named("column", HostType::Int, None, "input column")
+            .doc("test input"),
     }));
 }

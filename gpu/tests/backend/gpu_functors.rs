@@ -6,8 +6,11 @@
 //! must agree and why.
 
 use crate::data::Data;
+use dpp_gpu::agreement::{
+    both_fail, cell_names, cells_text, compare_cells, Differences, Report, SplitMix64, Tolerance,
+};
 use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
-use dpp_runtime::column::{ulp_distance, Scalar as Cell};
+use dpp_runtime::column::Scalar as Cell;
 use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, RunContext};
 use dpp_runtime::cpu::kernels::DEFAULT_CHUNK;
@@ -152,19 +155,20 @@ const GROUPED: Input = Input {
     ..input("x", Values::Any)
 };
 
-/// How the two backends' results must agree.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Tolerance {
-    /// Every bit, NaN payloads and the signs of zeros included.
-    Bits,
-    /// Every bit, but any NaN matches any NaN (WGSL fixes no NaN payload).
-    Exact,
-    /// [`Tolerance::Exact`], but `+0` matches `-0`.
-    ZeroSign,
-    /// Within this many units in the last place (NaN matches NaN).
-    Ulp(u32),
-    /// Both backends fail, with messages that contain this text.
+/// How the two backends' results must agree: within a [`Tolerance`], or
+/// both failing with messages that contain a text.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Expect {
+    Agree(Tolerance),
     Fails(&'static str),
+}
+
+const BITS: Expect = Expect::Agree(Tolerance::Bits);
+const EXACT: Expect = Expect::Agree(Tolerance::Exact);
+const ZERO_SIGN: Expect = Expect::Agree(Tolerance::ZeroSign);
+
+const fn ulp(n: u32) -> Expect {
+    Expect::Agree(Tolerance::Ulp(n))
 }
 
 /// A row of the table: `ops` (the pipeline's outputs, over the inputs) run
@@ -174,8 +178,8 @@ struct Case {
     types: &'static [Ty],
     inputs: &'static [Input],
     ops: &'static str,
-    tolerance: Tolerance,
-    /// Why that tolerance.
+    expect: Expect,
+    /// Why that expectation.
     why: &'static str,
 }
 
@@ -184,7 +188,7 @@ const fn case(
     types: &'static [Ty],
     inputs: &'static [Input],
     ops: &'static str,
-    tolerance: Tolerance,
+    expect: Expect,
     why: &'static str,
 ) -> Case {
     Case {
@@ -192,12 +196,12 @@ const fn case(
         types,
         inputs,
         ops,
-        tolerance,
+        expect,
         why,
     }
 }
 
-use Tolerance::{Bits, Exact, Fails, Ulp, ZeroSign};
+use Expect::Fails;
 
 const ROUNDED: &str = "WGSL's + - * are correctly rounded, like the CPU's; integers wrap on both";
 const MOVE: &str = "a move: every bit is kept";
@@ -210,37 +214,37 @@ const CONVERTS: &str =
 /// `map` over one to three elements. Ops without `out` are the output `r`.
 #[rustfmt::skip]
 const ELEMENTWISE: &[Case] = &[
-    case("add", NUMERIC, &[A, B], "map<add>(a, b)", Exact, ROUNDED),
-    case("sub", NUMERIC, &[A, B], "map<sub>(a, b)", Exact, ROUNDED),
-    case("mul", NUMERIC, &[A, B], "map<mul>(a, b)", Exact, ROUNDED),
-    case("min", INTEGER_OR_VECTOR, &[A, B], "map<min>(a, b)", Exact, GLAM),
-    case("min", &[Ty::F32], &[A, B], "map<min>(a, b)", ZeroSign, NAN_LOSES),
-    case("max", INTEGER_OR_VECTOR, &[A, B], "map<max>(a, b)", Exact, GLAM),
-    case("max", &[Ty::F32], &[A, B], "map<max>(a, b)", ZeroSign, NAN_LOSES),
-    case("or", BOOL, &[A, B], "map<or>(a, b)", Exact, "logic"),
-    case("and", BOOL, &[A, B], "map<and>(a, b)", Exact, "logic"),
-    case("div", INTEGER, &[A, input("b", Values::NonZero)], "map<div>(a, b)", Exact,
+    case("add", NUMERIC, &[A, B], "map<add>(a, b)", EXACT, ROUNDED),
+    case("sub", NUMERIC, &[A, B], "map<sub>(a, b)", EXACT, ROUNDED),
+    case("mul", NUMERIC, &[A, B], "map<mul>(a, b)", EXACT, ROUNDED),
+    case("min", INTEGER_OR_VECTOR, &[A, B], "map<min>(a, b)", EXACT, GLAM),
+    case("min", &[Ty::F32], &[A, B], "map<min>(a, b)", ZERO_SIGN, NAN_LOSES),
+    case("max", INTEGER_OR_VECTOR, &[A, B], "map<max>(a, b)", EXACT, GLAM),
+    case("max", &[Ty::F32], &[A, B], "map<max>(a, b)", ZERO_SIGN, NAN_LOSES),
+    case("or", BOOL, &[A, B], "map<or>(a, b)", EXACT, "logic"),
+    case("and", BOOL, &[A, B], "map<and>(a, b)", EXACT, "logic"),
+    case("div", INTEGER, &[A, input("b", Values::NonZero)], "map<div>(a, b)", EXACT,
         "integer division truncates on both; i32::MIN / -1 wraps"),
     case("div", INTEGER, &[A, input("b", Values::ZeroAtEnd)], "map<div>(a, b)",
         Fails("division by zero"), "an integer division by zero is a run-time error"),
-    case("div", FLOATS, &[A, input("b", Values::Divisor)], "map<div>(a, b)", Ulp(3),
+    case("div", FLOATS, &[A, input("b", Values::Divisor)], "map<div>(a, b)", ulp(3),
         "WGSL's / is within 2.5 ULP for |b| in [2^-126, 2^126], the CPU's correctly rounded"),
-    case("eq", SCALAR_OR_BOOL, &[A, B], "map<eq>(a, b)", Exact, "exact; NaN is unequal"),
-    case("ne", SCALAR_OR_BOOL, &[A, B], "map<ne>(a, b)", Exact, "exact; NaN is unequal"),
-    case("lt", SCALAR, &[A, B], "map<lt>(a, b)", Exact, "exact; NaN is unordered"),
-    case("le", SCALAR, &[A, B], "map<le>(a, b)", Exact, "exact; NaN is unordered"),
-    case("gt", SCALAR, &[A, B], "map<gt>(a, b)", Exact, "exact; NaN is unordered"),
-    case("ge", SCALAR, &[A, B], "map<ge>(a, b)", Exact, "exact; NaN is unordered"),
-    case("not", BOOL, &[A], "map<not>(a)", Exact, "logic"),
-    case("isZero", SCALAR, &[A], "map<isZero>(a)", Exact, "on the bits: -0 is zero, NaN is not"),
-    case("nonZero", SCALAR, &[A], "map<nonZero>(a)", Exact, "on the bits: -0 is zero, NaN is not"),
-    case("toU32", SCALAR_OR_BOOL, &[A], "map<toU32>(a)", Bits, CONVERTS),
-    case("toI32", SCALAR_OR_BOOL, &[A], "map<toI32>(a)", Bits, CONVERTS),
-    case("toF32", SCALAR_OR_BOOL, &[A], "map<toF32>(a)", Bits, CONVERTS),
-    case("select", ANY, &[COND, A, B], "map<select>(cond, a, b)", Bits, MOVE),
-    case("identity", ANY, &[A], "map<identity>(a)", Bits, MOVE),
-    case("hash", U32, &[A], "map<hash>(a)", Exact, "integer arithmetic, wrapping on both"),
-    case("random", U32, &[A], "map<random>(a)", Exact, "24 bits times 2^-24, exact on both"),
+    case("eq", SCALAR_OR_BOOL, &[A, B], "map<eq>(a, b)", EXACT, "exact; NaN is unequal"),
+    case("ne", SCALAR_OR_BOOL, &[A, B], "map<ne>(a, b)", EXACT, "exact; NaN is unequal"),
+    case("lt", SCALAR, &[A, B], "map<lt>(a, b)", EXACT, "exact; NaN is unordered"),
+    case("le", SCALAR, &[A, B], "map<le>(a, b)", EXACT, "exact; NaN is unordered"),
+    case("gt", SCALAR, &[A, B], "map<gt>(a, b)", EXACT, "exact; NaN is unordered"),
+    case("ge", SCALAR, &[A, B], "map<ge>(a, b)", EXACT, "exact; NaN is unordered"),
+    case("not", BOOL, &[A], "map<not>(a)", EXACT, "logic"),
+    case("isZero", SCALAR, &[A], "map<isZero>(a)", EXACT, "on the bits: -0 is zero, NaN is not"),
+    case("nonZero", SCALAR, &[A], "map<nonZero>(a)", EXACT, "on the bits: -0 is zero, NaN is not"),
+    case("toU32", SCALAR_OR_BOOL, &[A], "map<toU32>(a)", BITS, CONVERTS),
+    case("toI32", SCALAR_OR_BOOL, &[A], "map<toI32>(a)", BITS, CONVERTS),
+    case("toF32", SCALAR_OR_BOOL, &[A], "map<toF32>(a)", BITS, CONVERTS),
+    case("select", ANY, &[COND, A, B], "map<select>(cond, a, b)", BITS, MOVE),
+    case("identity", ANY, &[A], "map<identity>(a)", BITS, MOVE),
+    case("hash", U32, &[A], "map<hash>(a)", EXACT, "integer arithmetic, wrapping on both"),
+    case("random", U32, &[A], "map<random>(a)", EXACT, "24 bits times 2^-24, exact on both"),
 ];
 
 /// `hash` and `random` with the named argument `seed`, taken modulo 2^32:
@@ -255,12 +259,12 @@ const NAMED: &[Case] = &[
          out hMin = map<hash>(a, seed: -2147483648)
          out hBig = map<hash>(a, seed: 3000000000)
          out hBigWrapped = map<hash>(a, seed: -1294967296)",
-        Exact, "integer arithmetic, wrapping on both"),
+        EXACT, "integer arithmetic, wrapping on both"),
     case("random", U32, &[A],
         "out r1 = map<random>(a, seed: 1)
          out rNegative = map<random>(a, seed: -1)
          out rBig = map<random>(a, seed: 4294967295)",
-        Exact, "24 bits times 2^-24, exact on both"),
+        EXACT, "24 bits times 2^-24, exact on both"),
 ];
 
 /// What every monoid case computes (`{op}` is the case's functor): a
@@ -292,66 +296,33 @@ const ANY_MONOID: &[Input] = &monoid_inputs(Values::Any);
 /// the GPU (trees of partials, atomics).
 #[rustfmt::skip]
 const MONOIDS: &[Case] = &[
-    case("add", NUMERIC, SUMS, MONOID_OPS, Exact,
+    case("add", NUMERIC, SUMS, MONOID_OPS, EXACT,
         "float inputs whose sums are exact in any order; integers wrap"),
-    case("mul", NUMERIC, PRODUCTS, MONOID_OPS, Exact,
+    case("mul", NUMERIC, PRODUCTS, MONOID_OPS, EXACT,
         "float inputs whose products are exact in any order; integers wrap"),
-    case("min", INTEGER, ANY_MONOID, MONOID_OPS, Exact, "exact"),
-    case("min", FLOATS, ANY_MONOID, MONOID_OPS, ZeroSign,
+    case("min", INTEGER, ANY_MONOID, MONOID_OPS, EXACT, "exact"),
+    case("min", FLOATS, ANY_MONOID, MONOID_OPS, ZERO_SIGN,
         "NaN loses (per component), so any order gives the same value; -0 and +0 tie"),
-    case("max", INTEGER, ANY_MONOID, MONOID_OPS, Exact, "exact"),
-    case("max", FLOATS, ANY_MONOID, MONOID_OPS, ZeroSign,
+    case("max", INTEGER, ANY_MONOID, MONOID_OPS, EXACT, "exact"),
+    case("max", FLOATS, ANY_MONOID, MONOID_OPS, ZERO_SIGN,
         "NaN loses (per component), so any order gives the same value; -0 and +0 tie"),
-    case("or", BOOL, ANY_MONOID, MONOID_OPS, Exact, "logic"),
-    case("and", BOOL, ANY_MONOID, MONOID_OPS, Exact, "logic"),
+    case("or", BOOL, ANY_MONOID, MONOID_OPS, EXACT, "logic"),
+    case("and", BOOL, ANY_MONOID, MONOID_OPS, EXACT, "logic"),
 ];
 
 /// `gather<f>(x, group: k)` and `scatter<f>(a, fanout: k)`.
 #[rustfmt::skip]
 const GROUPED_CASES: &[Case] = &[
-    case("sum", NUMERIC, &[GROUPED], "gather<sum>(x, group: k)", Exact,
+    case("sum", NUMERIC, &[GROUPED], "gather<sum>(x, group: k)", EXACT,
         "both add in the same order, left to right from zero"),
-    case("average", SCALAR_OR_BOOL, &[GROUPED], "gather<average>(x, group: k)", Ulp(3),
+    case("average", SCALAR_OR_BOOL, &[GROUPED], "gather<average>(x, group: k)", ulp(3),
         "the same in-order sum, then WGSL's / (2.5 ULP) by k"),
-    case("repeat", ANY, &[A], "scatter<repeat>(a, fanout: k)", Bits, MOVE),
-    case("lane", ANY, &[A], "scatter<lane>(a, fanout: k)", Exact, "lane numbers"),
+    case("repeat", ANY, &[A], "scatter<repeat>(a, fanout: k)", BITS, MOVE),
+    case("lane", ANY, &[A], "scatter<lane>(a, fanout: k)", EXACT, "lane numbers"),
 ];
 
 // ---------------------------------------------------------------------------
 // Inputs
-
-/// SplitMix64: a small deterministic generator, seeded per column.
-struct Rng(u64);
-
-impl Rng {
-    fn new(seed: &str) -> Rng {
-        // FNV-1a of the seed text.
-        let hash = seed.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
-            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-        });
-        Rng(hash)
-    }
-
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-
-    fn chance(&mut self, one_in: u64) -> bool {
-        self.below(one_in) == 0
-    }
-
-    fn pick<T: Copy>(&mut self, values: &[T]) -> T {
-        values[self.below(values.len() as u64) as usize]
-    }
-}
 
 const U32_EDGES: &[u32] = &[
     0,
@@ -471,7 +442,7 @@ fn probe_subnormals(setup: &Setup, gpu: &GpuContext) {
 /// Element `i` of the `role`-th input column among the edges: the first
 /// `E²` elements of roles 0 and 1 hold every pair of edges, other roles a
 /// spread of them; `None` past that unless by chance.
-fn edge_index(i: usize, role: usize, edges: usize, rng: &mut Rng) -> Option<usize> {
+fn edge_index(i: usize, role: usize, edges: usize, rng: &mut SplitMix64) -> Option<usize> {
     if i < edges * edges {
         return Some(match role {
             0 => i % edges,
@@ -482,28 +453,28 @@ fn edge_index(i: usize, role: usize, edges: usize, rng: &mut Rng) -> Option<usiz
     rng.chance(4).then(|| rng.below(edges as u64) as usize)
 }
 
-fn random_u32(rng: &mut Rng) -> u32 {
+fn random_u32(rng: &mut SplitMix64) -> u32 {
     if rng.chance(2) {
-        rng.next() as u32
+        rng.next_u64() as u32
     } else {
         rng.below(1000) as u32
     }
 }
 
-fn random_f32(rng: &mut Rng) -> f32 {
+fn random_f32(rng: &mut SplitMix64) -> f32 {
     match rng.below(10) {
         0..=6 => {
             // A random normal float of magnitude 2^-40 .. 2^40.
             let exponent = rng.below(81) as u32 + 127 - 40;
-            let sign = (rng.next() as u32) & 0x8000_0000;
-            f32::from_bits(sign | exponent << 23 | (rng.next() as u32 & 0x7f_ffff))
+            let sign = (rng.next_u64() as u32) & 0x8000_0000;
+            f32::from_bits(sign | exponent << 23 | (rng.next_u64() as u32 & 0x7f_ffff))
         }
         7 | 8 => rng.below(201) as f32 - 100.0,
         _ => (rng.below(64) as f32 - 32.0) / 8.0,
     }
 }
 
-fn bools(n: usize, role: usize, values: Values, rng: &mut Rng) -> Vec<bool> {
+fn bools(n: usize, role: usize, values: Values, rng: &mut SplitMix64) -> Vec<bool> {
     (0..n)
         .map(|i| match values {
             Values::Flags => rng.chance(10),
@@ -513,7 +484,7 @@ fn bools(n: usize, role: usize, values: Values, rng: &mut Rng) -> Vec<bool> {
         .collect()
 }
 
-fn u32s(n: usize, role: usize, values: Values, m: usize, rng: &mut Rng) -> Vec<u32> {
+fn u32s(n: usize, role: usize, values: Values, m: usize, rng: &mut SplitMix64) -> Vec<u32> {
     let mut column: Vec<u32> = (0..n)
         .map(|i| match values {
             Values::Index => rng.below(m as u64) as u32,
@@ -527,11 +498,11 @@ fn u32s(n: usize, role: usize, values: Values, m: usize, rng: &mut Rng) -> Vec<u
     column
 }
 
-fn i32s(n: usize, role: usize, values: Values, rng: &mut Rng) -> Vec<i32> {
+fn i32s(n: usize, role: usize, values: Values, rng: &mut SplitMix64) -> Vec<i32> {
     let mut column: Vec<i32> = (0..n)
         .map(|i| match edge_index(i, role, I32_EDGES.len(), rng) {
             Some(e) => I32_EDGES[e],
-            None if rng.chance(2) => rng.next() as i32,
+            None if rng.chance(2) => rng.next_u64() as i32,
             None => rng.below(2001) as i32 - 1000,
         })
         .collect();
@@ -554,7 +525,7 @@ fn nonzero<T: Copy + Default + PartialEq>(column: &mut [T], values: Values, one:
 }
 
 /// Component `component` of a float column (scalars have one).
-fn f32s(n: usize, role: usize, component: usize, values: Values, rng: &mut Rng) -> Vec<f32> {
+fn f32s(n: usize, role: usize, component: usize, values: Values, rng: &mut SplitMix64) -> Vec<f32> {
     let edges = f32_edges();
     (0..n)
         .map(|i| match values {
@@ -589,9 +560,9 @@ fn column(
     m: usize,
     role: usize,
     values: Values,
-    rng: &mut Rng,
+    rng: &mut SplitMix64,
 ) -> Column {
-    let vectors = |components: usize, rng: &mut Rng| -> Vec<Vec<f32>> {
+    let vectors = |components: usize, rng: &mut SplitMix64| -> Vec<Vec<f32>> {
         (0..components)
             .map(|c| f32s(len, role, c, values, rng))
             .collect()
@@ -697,56 +668,10 @@ fn host_cells(value: HostValue) -> Vec<Cell> {
     }
 }
 
-fn cells_text(cells: &[Cell]) -> String {
-    let text: Vec<String> = cells
-        .iter()
-        .map(|cell| match cell {
-            Cell::Int(x) => x.to_string(),
-            Cell::Float(x) => format!("{x:?} ({:#010x})", x.to_bits()),
-        })
-        .collect();
-    match text.len() {
-        1 => text[0].clone(),
-        _ => format!("({})", text.join(", ")),
-    }
-}
-
-fn floats_agree(cpu: f32, gpu: f32, tolerance: Tolerance) -> bool {
-    if cpu.to_bits() == gpu.to_bits() {
-        return true;
-    }
-    // A GPU that flushes subnormals does so before rounding: a result whose
-    // exact value is subnormal is a zero of its sign there, also where the
-    // CPU rounds it up to the least normal float (seen on an NVIDIA H100).
-    let tiny = cpu.is_subnormal() || cpu.abs() == f32::MIN_POSITIVE;
-    if flushes_subnormals() && tiny && gpu == 0.0 {
-        return cpu.is_sign_negative() == gpu.is_sign_negative();
-    }
-    if tolerance == Bits {
-        return false;
-    }
-    if cpu.is_nan() || gpu.is_nan() {
-        return cpu.is_nan() && gpu.is_nan();
-    }
-    match tolerance {
-        ZeroSign => cpu == 0.0 && gpu == 0.0,
-        Ulp(n) => ulp_distance(cpu, gpu) <= u64::from(n),
-        _ => false,
-    }
-}
-
-fn cells_agree(cpu: &[Cell], gpu: &[Cell], tolerance: Tolerance) -> bool {
-    cpu.len() == gpu.len()
-        && cpu.iter().zip(gpu).all(|pair| match pair {
-            (Cell::Int(a), Cell::Int(b)) => a == b,
-            (Cell::Float(a), Cell::Float(b)) => floats_agree(*a, *b, tolerance),
-            _ => false,
-        })
-}
-
 /// One run of a case: its inputs and what each backend made of them.
 struct Run<'a> {
     case: &'a Case,
+    records: &'a RecordRegistry,
     ty: Ty,
     n: usize,
     data: Data,
@@ -779,14 +704,22 @@ impl Run<'_> {
     fn describe(&self) -> String {
         format!(
             "`{}` on {:?}, n = {} ({:?}: {})",
-            self.case.functor, self.ty, self.n, self.case.tolerance, self.case.why
+            self.case.functor, self.ty, self.n, self.case.expect, self.case.why
         )
     }
 }
 
 /// Compares one output of both backends; the first disagreement, described.
-fn compare(run: &Run<'_>, name: &str, cpu: &OutputValue, gpu: &OutputValue) -> Option<String> {
-    let tolerance = run.case.tolerance;
+fn compare(
+    run: &Run<'_>,
+    name: &str,
+    cpu: &OutputValue,
+    gpu: &OutputValue,
+    differences: &mut Differences,
+) -> Option<String> {
+    let Expect::Agree(tolerance) = run.case.expect else {
+        unreachable!("only cases that agree compare outputs")
+    };
     let (cpu_cells, gpu_cells): (Vec<Vec<Cell>>, Vec<Vec<Cell>>) = match (cpu, gpu) {
         (OutputValue::Host(a), OutputValue::Host(b)) => {
             (vec![host_cells(*a)], vec![host_cells(*b)])
@@ -815,8 +748,16 @@ fn compare(run: &Run<'_>, name: &str, cpu: &OutputValue, gpu: &OutputValue) -> O
         }
         _ => return Some(format!("{}: `{name}` differs in kind", run.describe())),
     };
-    let i =
-        (0..cpu_cells.len()).find(|&i| !cells_agree(&cpu_cells[i], &gpu_cells[i], tolerance))?;
+    let names = match cpu {
+        OutputValue::Array(column) => cell_names(column.elem_type(), run.records),
+        OutputValue::Host(_) => Vec::new(),
+    };
+    let flushes = flushes_subnormals();
+    let i = (0..cpu_cells.len()).find(|&i| {
+        let (cpu, gpu) = (&cpu_cells[i], &gpu_cells[i]);
+        let functor = run.case.functor;
+        !compare_cells(cpu, gpu, &names, tolerance, flushes, differences, functor).is_empty()
+    })?;
     let inputs = match cpu {
         OutputValue::Host(_) => String::from(" (a reduction: all inputs)"),
         OutputValue::Array(_) => run.inputs_at(i),
@@ -858,7 +799,8 @@ fn prepare(setup: &Setup, case: &Case, ty: Ty, n: usize) -> (Plan, Data) {
                 Len::M => m,
             };
             let ty = input.ty.unwrap_or(ty);
-            let mut rng = Rng::new(&format!("{} {ty:?} {} {n}", case.functor, input.name));
+            let mut rng =
+                SplitMix64::from_text(&format!("{} {ty:?} {} {n}", case.functor, input.name));
             column(ty, setup.pair, len, m, role, input.values, &mut rng)
         })
         .collect();
@@ -896,29 +838,37 @@ fn run_gpu(
 
 /// Runs `case` on both backends for every type and size; returns the
 /// disagreements (the first per output and run).
-fn check(setup: &Setup, gpu: &GpuContext, case: &Case) -> Vec<String> {
+fn check(
+    setup: &Setup,
+    gpu: &GpuContext,
+    case: &Case,
+    differences: &mut Differences,
+) -> Vec<String> {
     let mut failures = Vec::new();
     for &ty in case.types {
         for n in SIZES {
             let (plan, data) = prepare(setup, case, ty, n);
-            let run = Run { case, ty, n, data };
+            let records = &setup.library.records;
+            let run = Run {
+                case,
+                records,
+                ty,
+                n,
+                data,
+            };
             let cpu = run_cpu(setup, &plan, &run.data);
             let gpu = run_gpu(setup, gpu, &plan, &run.data);
-            match (case.tolerance, cpu, gpu) {
-                (Fails(text), Err(cpu), Err(gpu))
-                    if cpu.message.contains(text) && gpu.message.contains(text) => {}
+            match (case.expect, cpu, gpu) {
                 // Nothing to divide.
                 (Fails(_), Ok(_), Ok(_)) if n == 0 => {}
-                (Fails(text), cpu, gpu) => failures.push(format!(
-                    "{}: both backends should fail with `{text}`; CPU: {:?}, GPU: {:?}",
-                    run.describe(),
-                    cpu.err(),
-                    gpu.err()
-                )),
+                (Fails(text), cpu, gpu) => {
+                    let (cpu, gpu) = (cpu.map_err(|e| e.message), gpu.map_err(|e| e.message));
+                    failures.extend(both_fail(&run.describe(), text, cpu, gpu).err());
+                }
                 (_, Ok(cpu), Ok(gpu)) => {
                     for ((name, cpu), (gpu_name, gpu)) in cpu.outputs.iter().zip(&gpu.outputs) {
                         assert_eq!(name, gpu_name);
-                        failures.extend(compare(&run, name, cpu, gpu));
+                        failures.extend(compare(&run, name, cpu, gpu, differences));
                     }
                 }
                 (_, cpu, gpu) => failures.push(format!(
@@ -938,16 +888,12 @@ fn check_table(table: &[Case]) {
     let Some(gpu) = crate::gpu() else { return };
     let setup = setup();
     probe_subnormals(&setup, gpu);
-    let failures: Vec<String> = table
-        .iter()
-        .flat_map(|case| check(&setup, gpu, case))
-        .collect();
-    assert!(
-        failures.is_empty(),
-        "{} disagreement(s) between the backends:\n{}",
-        failures.len(),
-        failures.join("\n")
-    );
+    let mut report = Report::default();
+    for case in table {
+        let failures = check(&setup, gpu, case, &mut report.differences);
+        report.case(failures);
+    }
+    report.assert_agreement();
 }
 
 #[test]
@@ -993,7 +939,7 @@ fn integer_arguments_beyond_32_bits_are_an_error_on_the_gpu() {
         U32,
         &[A],
         "out h = map<hash>(a, seed: 8589934599)",
-        Exact,
+        EXACT,
         "",
     );
     let (plan, data) = prepare(&setup, &case, Ty::U32, 65);

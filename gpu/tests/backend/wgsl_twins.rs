@@ -3,11 +3,12 @@
 //! with the CPU by the GPU backend's tests, which need a GPU.
 
 use dpp_gpu::check_twin;
+use dpp_runtime::functor::no_twin;
 use dpp_runtime::generic::register_generic_functors;
-use dpp_runtime::wgsl::{no_twin, WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    FunctorLibrary, RecordId, RecordType, Signature, TypeConstraint, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorLibrary, RecordId,
+    RecordType, Signature, TypeConstraint, TypePattern,
 };
 
 /// Every generic functor; the library must hold exactly these.
@@ -220,17 +221,8 @@ impl Functor for CpuOnly {
 #[test]
 fn a_functor_without_a_twin_says_so() {
     let (library, _) = library();
-    let functor = CpuOnly(Signature {
-        name: "cpuOnly",
-        kind: FunctorKind::Map,
-        inputs: Vec::new(),
-        outputs: vec![ArrayParam {
-            name: "out",
-            ty: TypePattern::Var(0, TypeConstraint::Any),
-        }],
-        named: Vec::new(),
-        doc: "",
-    });
+    let functor =
+        CpuOnly(Signature::map("cpuOnly").output("out", TypePattern::Var(0, TypeConstraint::Any)));
     let request = WgslRequest {
         function: "twin_cpuOnly",
         inputs: &[],

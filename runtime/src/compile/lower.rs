@@ -5,8 +5,9 @@
 
 use super::ir::*;
 use super::resolve::{is_reserved, Program};
-use crate::functor::{FunctorKind, FunctorLibrary, Signature};
+use crate::functor::FunctorLibrary;
 use crate::host::HostValue;
+use crate::signature::{FunctorKind, Signature};
 use crate::types::HostType;
 use dpp_dsl::ast::{self, Block, Call, ExprKind, Ident, StmtKind};
 use dpp_dsl::{did_you_mean, Code, Diagnostic, Span};

@@ -2,9 +2,10 @@
 //! every op against its functor's signature and its primitive's rules.
 
 use super::ir::*;
-use crate::functor::{FunctorLibrary, TypePattern};
+use crate::functor::FunctorLibrary;
 use crate::host::HostValue;
 use crate::monoid::monoid_supports;
+use crate::signature::TypePattern;
 use crate::types::{ElemType, HostType, RecordRegistry};
 use dpp_dsl::ast::{BinaryOp, UnaryOp};
 use dpp_dsl::{did_you_mean, Code, Diagnostic, Span};
@@ -423,7 +424,7 @@ impl Checker<'_> {
     fn instantiate(
         &mut self,
         op: &Op,
-        signature: &crate::functor::Signature,
+        signature: &crate::signature::Signature,
         inputs: &[ElemType],
     ) -> Option<Vec<ElemType>> {
         let mut bound: Vec<Option<ElemType>> = vec![None; 8];

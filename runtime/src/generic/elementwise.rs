@@ -1,15 +1,13 @@
 //! The generic `map` functors: one element of each input to one output element.
 
 use super::{
-    functor, is_nan, signature, unexpected_type, Body, ANY, BOOL, F32, NUMERIC, SCALAR,
-    SCALAR_OR_BOOL, U32,
+    functor, is_nan, unexpected_type, Body, ANY, BOOL, F32, NUMERIC, SCALAR, SCALAR_OR_BOOL, U32,
 };
 use crate::column::{Column, ColumnView};
 use crate::elem::{check_length, typed_slice, with_element_type, PrimitiveElement};
-use crate::functor::{
-    CallContext, Functor, FunctorError, FunctorKind, NamedParam, Signature, TypePattern,
-};
+use crate::functor::{CallContext, Functor, FunctorError};
 use crate::host::HostValue;
+use crate::signature::{Signature, TypePattern};
 use crate::types::{ElemType, HostType};
 use crate::wgsl::{WgslModule, WgslRequest};
 use glam::{Vec2, Vec3, Vec4};
@@ -17,83 +15,55 @@ use std::borrow::Cow;
 use std::sync::Arc;
 
 pub(super) fn functors() -> Vec<Arc<dyn Functor>> {
-    let binary = |ty| [("a", ty), ("b", ty)];
     let mut functors = vec![
         functor(
-            map(
-                "sub",
-                &binary(NUMERIC),
-                NUMERIC,
-                "a - b, componentwise; u32 and i32 wrap around",
-            ),
+            binary("sub", NUMERIC)
+                .output("out", NUMERIC)
+                .doc("a - b, componentwise; u32 and i32 wrap around"),
             |_, inputs| subtract(inputs),
             |request| numeric_twin(request, Body::returns("a - b")),
         ),
         functor(
-            map(
-                "div",
-                &binary(NUMERIC),
-                NUMERIC,
+            binary("div", NUMERIC).output("out", NUMERIC).doc(
                 "a / b, componentwise; integers truncate toward zero, an integer division by zero is an error",
             ),
             divide,
             divide_twin,
         ),
         functor(
-            map("not", &[("x", BOOL)], BOOL, "!x"),
+            unary("not", BOOL, BOOL).doc("!x"),
             |_, inputs| Ok(map_with(typed_slice::<bool>(&inputs[0])?, |x| !x)),
             |_| Ok(Body::returns("!x")),
         ),
         functor(
-            map(
-                "select",
-                &[("cond", BOOL), ("a", ANY), ("b", ANY)],
-                ANY,
-                "a where cond, else b (any element type, records too)",
-            ),
+            Signature::map("select")
+                .input("cond", BOOL)
+                .input("a", ANY)
+                .input("b", ANY)
+                .output("out", ANY)
+                .doc("a where cond, else b (any element type, records too)"),
             |_, inputs| select(typed_slice::<bool>(&inputs[0])?, &inputs[1], &inputs[2]),
             select_twin,
         ),
         functor(
-            map(
-                "identity",
-                &[("x", ANY)],
-                ANY,
-                "x unchanged (a copy), for any element type",
-            ),
+            unary("identity", ANY, ANY).doc("x unchanged (a copy), for any element type"),
             |_, inputs| Ok(inputs[0].to_column()),
             |_| Ok(Body::returns("x")),
         ),
         functor(
-            map(
-                "isZero",
-                &[("x", SCALAR)],
-                BOOL,
-                "x == 0 (true for -0.0, false for NaN)",
-            ),
+            unary("isZero", SCALAR, BOOL).doc("x == 0 (true for -0.0, false for NaN)"),
             |_, inputs| compare_with_zero(inputs, true),
             |request| compare_with_zero_twin(request, true),
         ),
         functor(
-            map(
-                "nonZero",
-                &[("x", SCALAR)],
-                BOOL,
-                "x != 0 (false for -0.0, true for NaN)",
-            ),
+            unary("nonZero", SCALAR, BOOL).doc("x != 0 (false for -0.0, true for NaN)"),
             |_, inputs| compare_with_zero(inputs, false),
             |request| compare_with_zero_twin(request, false),
         ),
         functor(
-            Signature {
-                named: vec![seed_param()],
-                ..map(
-                    "hash",
-                    &[("x", U32)],
-                    U32,
-                    "a stateless pseudo-random u32 per element: the PCG hash of x mixed with the hashed seed",
-                )
-            },
+            seeded(unary("hash", U32, U32)).doc(
+                "a stateless pseudo-random u32 per element: the PCG hash of x mixed with the hashed seed",
+            ),
             |ctx, inputs| {
                 let seed = seed(ctx)?;
                 let values = typed_slice::<u32>(&inputs[0])?;
@@ -102,15 +72,9 @@ pub(super) fn functors() -> Vec<Arc<dyn Functor>> {
             |_| Ok(Body::returns(seeded_hash_wgsl("x", "seed")).with_module(pcg_module())),
         ),
         functor(
-            Signature {
-                named: vec![seed_param()],
-                ..map(
-                    "random",
-                    &[("x", U32)],
-                    F32,
-                    "a stateless pseudo-random f32 in [0, 1) per element: the top 24 bits of hash(x)",
-                )
-            },
+            seeded(unary("random", U32, F32)).doc(
+                "a stateless pseudo-random f32 in [0, 1) per element: the top 24 bits of hash(x)",
+            ),
             |ctx, inputs| {
                 let seed = seed(ctx)?;
                 let values = typed_slice::<u32>(&inputs[0])?;
@@ -152,7 +116,7 @@ pub(super) fn functors() -> Vec<Arc<dyn Functor>> {
     ];
     functors.extend(comparisons.into_iter().map(|(name, comparison, ty, doc)| {
         functor(
-            map(name, &binary(ty), BOOL, doc),
+            binary(name, ty).output("out", BOOL).doc(doc),
             move |_, inputs| compare(comparison, inputs),
             move |request| compare_twin(comparison, request),
         )
@@ -175,9 +139,8 @@ pub(super) fn functors() -> Vec<Arc<dyn Functor>> {
         ),
     ];
     functors.extend(conversions.into_iter().map(|(name, target, doc)| {
-        let output = TypePattern::Exact(target);
         functor(
-            map(name, &[("x", SCALAR_OR_BOOL)], output, doc),
+            unary(name, SCALAR_OR_BOOL, target).doc(doc),
             move |_, inputs| convert(target, inputs),
             move |request| convert_twin(target, request),
         )
@@ -185,13 +148,14 @@ pub(super) fn functors() -> Vec<Arc<dyn Functor>> {
     functors
 }
 
-fn map(
-    name: &'static str,
-    inputs: &[(&'static str, TypePattern)],
-    output: TypePattern,
-    doc: &'static str,
-) -> Signature {
-    signature(FunctorKind::Map, name, inputs, output, doc)
+/// A `map` signature with inputs `a` and `b` of type `ty` (its output still to add).
+fn binary(name: &'static str, ty: TypePattern) -> Signature {
+    Signature::map(name).input("a", ty).input("b", ty)
+}
+
+/// A `map` signature from `x: input` to `out: output`.
+fn unary(name: &'static str, input: TypePattern, output: impl Into<TypePattern>) -> Signature {
+    Signature::map(name).input("x", input).output("out", output)
 }
 
 fn map_with<T: Copy, U: PrimitiveElement>(values: &[T], f: impl Fn(T) -> U) -> Column {
@@ -570,13 +534,14 @@ fn select_twin(request: &WgslRequest<'_>) -> Result<Body, FunctorError> {
     }
 }
 
-fn seed_param() -> NamedParam {
-    NamedParam {
-        name: "seed",
-        ty: HostType::Int,
-        default: Some(HostValue::Int(0)),
-        doc: "chooses an independent hash; taken modulo 2^32",
-    }
+/// `signature` with the `seed` argument of `hash` and `random`.
+fn seeded(signature: Signature) -> Signature {
+    signature.named(
+        "seed",
+        HostType::Int,
+        Some(HostValue::Int(0)),
+        "chooses an independent hash; taken modulo 2^32",
+    )
 }
 
 fn seed(ctx: &CallContext<'_>) -> Result<u32, FunctorError> {

@@ -3,13 +3,14 @@
 //! `scatter<f>(src, fanout: k)`).
 
 use super::elementwise::{conversion_wgsl, conversions_module, ScalarConversions};
-use super::{functor, signature, unexpected_type, Body, ANY, F32, NUMERIC, SCALAR_OR_BOOL, U32};
+use super::{functor, unexpected_type, Body, ANY, F32, NUMERIC, SCALAR_OR_BOOL, U32};
 use crate::column::gather_by_position;
 use crate::column::{Column, ColumnView};
 use crate::elem::{typed_slice, with_element_type, KernelError};
-use crate::functor::{CallContext, Functor, FunctorError, FunctorKind};
+use crate::functor::{CallContext, Functor, FunctorError};
 use crate::monoid::reduce_groups;
 use crate::monoid::MonoidOp;
+use crate::signature::Signature;
 use crate::types::ElemType;
 use crate::wgsl::WgslRequest;
 use std::sync::Arc;
@@ -17,35 +18,26 @@ use std::sync::Arc;
 pub(super) fn functors() -> Vec<Arc<dyn Functor>> {
     vec![
         functor(
-            signature(
-                FunctorKind::Group,
-                "sum",
-                &[("x", NUMERIC)],
-                NUMERIC,
-                "the sum of each group of k elements, in order; u32 and i32 wrap around",
-            ),
+            Signature::group("sum")
+                .input("x", NUMERIC)
+                .output("out", NUMERIC)
+                .doc("the sum of each group of k elements, in order; u32 and i32 wrap around"),
             |ctx, inputs| Ok(reduce_groups(MonoidOp::Add, &inputs[0], ctx.group)?),
             sum_twin,
         ),
         functor(
-            signature(
-                FunctorKind::Group,
-                "average",
-                &[("x", SCALAR_OR_BOOL)],
-                F32,
-                "the mean of each group of k elements as f32 (for bool: the fraction that are true)",
-            ),
+            Signature::group("average")
+                .input("x", SCALAR_OR_BOOL)
+                .output("out", F32)
+                .doc("the mean of each group of k elements as f32 (for bool: the fraction that are true)"),
             average,
             average_twin,
         ),
         functor(
-            signature(
-                FunctorKind::Expand,
-                "repeat",
-                &[("x", ANY)],
-                ANY,
-                "x[i] in each of the k lanes: out[i*k + j] = x[i]",
-            ),
+            Signature::expand("repeat")
+                .input("x", ANY)
+                .output("out", ANY)
+                .doc("x[i] in each of the k lanes: out[i*k + j] = x[i]"),
             |ctx, inputs| {
                 let lanes = ctx.group;
                 let len = inputs[0].len() * lanes;
@@ -56,13 +48,10 @@ pub(super) fn functors() -> Vec<Arc<dyn Functor>> {
             |_| Ok(Body::returns("src")),
         ),
         functor(
-            signature(
-                FunctorKind::Expand,
-                "lane",
-                &[("x", ANY)],
-                U32,
-                "the lane number: out[i*k + j] = j",
-            ),
+            Signature::expand("lane")
+                .input("x", ANY)
+                .output("out", U32)
+                .doc("the lane number: out[i*k + j] = j"),
             lane,
             // `k` is a u32 on the GPU, so every lane number fits.
             |_| Ok(Body::returns("lane")),

@@ -7,12 +7,10 @@ mod elementwise;
 mod grouped;
 
 use crate::column::{Column, ColumnView};
-use crate::functor::{
-    ArrayParam, CallContext, Functor, FunctorError, FunctorKind, FunctorLibrary, Signature,
-    TypeConstraint, TypePattern,
-};
+use crate::functor::{CallContext, Functor, FunctorError, FunctorLibrary};
 use crate::monoid::combine_columns;
 use crate::monoid::MonoidOp;
+use crate::signature::{Signature, TypeConstraint, TypePattern};
 use crate::types::ElemType;
 use crate::wgsl::{elem_type_wgsl, twin_parameters, WgslModule, WgslRequest, WgslTwin};
 use std::fmt::Display;
@@ -193,30 +191,6 @@ fn is_nan(value: &str, ty: ElemType) -> Option<String> {
     ))
 }
 
-/// A signature with array inputs, one output named `out` and no named parameters.
-fn signature(
-    kind: FunctorKind,
-    name: &'static str,
-    inputs: &[(&'static str, TypePattern)],
-    output: TypePattern,
-    doc: &'static str,
-) -> Signature {
-    Signature {
-        name,
-        kind,
-        inputs: inputs
-            .iter()
-            .map(|&(name, ty)| ArrayParam { name, ty })
-            .collect(),
-        outputs: vec![ArrayParam {
-            name: "out",
-            ty: output,
-        }],
-        named: Vec::new(),
-        doc,
-    }
-}
-
 fn functor(
     signature: Signature,
     kernel: impl Fn(&CallContext<'_>, &[ColumnView<'_>]) -> Result<Column, FunctorError>
@@ -272,9 +246,12 @@ fn monoid_functors() -> Vec<Arc<dyn Functor>> {
     monoids
         .into_iter()
         .map(|(op, name, ty, doc)| {
-            let kind = FunctorKind::Monoid(op);
             functor(
-                signature(kind, name, &[("a", ty), ("b", ty)], ty, doc),
+                Signature::monoid(op, name)
+                    .input("a", ty)
+                    .input("b", ty)
+                    .output("out", ty)
+                    .doc(doc),
                 move |_, inputs| Ok(combine_columns(op, &inputs[0], &inputs[1])?),
                 move |request| monoid_twin(op, request),
             )

@@ -1,7 +1,7 @@
 use super::*;
 use crate::builtin_scene::builtin_scene;
-use crate::random::SplitMix64;
 use crate::test_meshes::{box_outward, subdivided_cube, vertex_and_edge_targets};
+use dpp_runtime::random::SplitMix64;
 use obvhs::aabb::Aabb;
 
 /// The watertight test applied to one file-order triangle, dispatched like `traverse`.

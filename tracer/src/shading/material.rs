@@ -125,6 +125,15 @@ impl Default for MeshMaterials {
 }
 
 impl MeshMaterials {
+    /// The material id of triangle `prim` (0 for an unknown triangle).
+    #[inline]
+    pub fn triangle_material(&self, prim: u32) -> u32 {
+        self.triangle_materials
+            .get(prim as usize)
+            .copied()
+            .unwrap_or(0)
+    }
+
     /// Checks the table against a mesh of `triangles` triangles.
     pub fn validate(&self, triangles: usize) -> Result<(), String> {
         if self.materials.is_empty() {

@@ -1,6 +1,6 @@
 //! Shading set-up a user can drive: materials, point lights, the colour map and
-//! scalar range, the background. [`Shading::for_scene`] derives defaults from a
-//! scene; a [`SceneFile`] (TOML) and command-line overrides change them; the
+//! scalar range, the background. [`Shading::for_mesh`] (and
+//! [`Shading::for_scene`](crate::TraceScene)) derives defaults from a scene; a [`SceneFile`] (TOML) and command-line overrides change them; the
 //! functors read the result from [`crate::TraceResources::shading`].
 //!
 //! # The shading model (the `shader` functor)
@@ -35,7 +35,6 @@ pub use scene_file::{ColorSpec, LightSpec, MaterialSpec, SceneFile};
 pub use srgb::{encode_in_place as encode_srgb_in_place, linear_to_srgb, srgb_to_linear};
 
 use crate::mesh::Bounds;
-use crate::scene::TraceScene;
 use glam::Vec3;
 use std::path::PathBuf;
 use std::str::FromStr;
@@ -191,15 +190,16 @@ pub struct Shading {
 }
 
 impl Shading {
-    /// The defaults for a scene: its material table (from the MTL, or the default
-    /// material), [`default_lights`], `viridis` over the mesh's scalar range, and a
-    /// dark blue-grey background.
-    pub fn for_scene(scene: &TraceScene) -> Shading {
+    /// The defaults for a mesh of these `bounds` and vertex `scalars`: its
+    /// material table (from the MTL, or the default material),
+    /// [`default_lights`], `viridis` over the scalar range, and a dark
+    /// blue-grey background.
+    pub fn for_mesh(materials: &MeshMaterials, bounds: &Bounds, scalars: &[f32]) -> Shading {
         Shading {
-            materials: scene.materials.materials.clone(),
-            lights: default_lights(&scene.bounds),
+            materials: materials.materials.clone(),
+            lights: default_lights(bounds),
             colormap: ColorMap::named(DEFAULT_COLORMAP).expect("the default colour map exists"),
-            scalar_range: default_scalar_range(scene.mesh.scalars.as_deref().unwrap_or(&[])),
+            scalar_range: default_scalar_range(scalars),
             background: srgb_to_linear(DEFAULT_BACKGROUND),
         }
     }
@@ -385,34 +385,20 @@ fn default_scalar_range(scalars: &[f32]) -> [f32; 2] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::TriangleMesh;
 
-    fn scene() -> TraceScene {
-        let mesh = TriangleMesh {
-            positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(0.0, 2.0, 0.0)],
-            triangles: vec![[0, 1, 2]],
-            normals: None,
-            scalars: None,
+    /// The defaults of a triangle whose scalars are its vertices' y (as
+    /// [`crate::TraceScene`] fills them in).
+    fn shading() -> Shading {
+        let bounds = Bounds {
+            min: Vec3::ZERO,
+            max: Vec3::new(1.0, 2.0, 0.0),
         };
-        TraceScene::new(mesh).unwrap()
+        Shading::for_mesh(&MeshMaterials::default(), &bounds, &[0.0, 0.0, 2.0])
     }
 
+    /// (The rest of the defaults: `Shading::for_scene`'s test in `scene.rs`.)
     #[test]
-    fn defaults_follow_the_scene() {
-        let scene = scene();
-        let shading = Shading::for_scene(&scene);
-        assert_eq!(shading.materials(), &[Material::named(DEFAULT_MATERIAL)]);
-        assert_eq!(shading.colormap().name(), "viridis");
-        // Scalars default to y.
-        assert_eq!(shading.scalar_range(), [0.0, 2.0]);
-        assert_eq!(shading.lights().len(), 2);
-        let c = scene.bounds.center();
-        let key = shading.lights()[0];
-        assert!(key.position.y > scene.bounds.max.y && key.position.z > c.z);
-        // The key light delivers 1.0 at the centre with falloff 1.
-        let d = (key.position - c).length() / scene.bounds.diagonal();
-        assert!((key.intensity / (1.0 + d * d) - 1.0).abs() < 1e-5);
-        assert!((shading.background() - srgb_to_linear(DEFAULT_BACKGROUND)).length() < 1e-6);
+    fn default_scalar_ranges_widen_a_single_value_and_skip_nan() {
         assert_eq!(default_scalar_range(&[3.0, 3.0]), [2.5, 3.5]);
         assert_eq!(default_scalar_range(&[f32::NAN]), [0.0, 1.0]);
         assert_eq!(default_scalar_range(&[1.0, f32::NAN, -2.0]), [-2.0, 1.0]);
@@ -420,7 +406,7 @@ mod tests {
 
     #[test]
     fn scene_file_overrides_everything_it_names() {
-        let mut shading = Shading::for_scene(&scene());
+        let mut shading = shading();
         let file = SceneFile::parse(
             r#"
 colormap = "cool-to-warm"
@@ -450,7 +436,7 @@ reflectivity = 0.25
 
     #[test]
     fn bad_scene_files_are_errors_and_change_nothing() {
-        let original = Shading::for_scene(&scene());
+        let original = shading();
         let cases = [
             ("colormap = \"virdis\"", "did you mean `viridis`"),
             ("scalar_range = [2, 1]", "scalar range"),
@@ -489,7 +475,7 @@ reflectivity = 0.25
 
     #[test]
     fn command_line_overrides() {
-        let mut shading = Shading::for_scene(&scene());
+        let mut shading = shading();
         let light: PointLight = "1, 2, 3".parse().unwrap();
         assert_eq!(light, PointLight::new(Vec3::new(1.0, 2.0, 3.0), 1.0));
         let dim: PointLight = "0,0,5,0.5".parse().unwrap();

@@ -14,7 +14,7 @@
 //! - [`sphere`], [`plane`]: signed distances (level 0) for testing meshing.
 
 use super::{sample_count, Volume, VolumeError, MAX_SAMPLES};
-use crate::random::SplitMix64;
+use dpp_runtime::random::SplitMix64;
 use glam::{UVec3, Vec3};
 use rayon::prelude::*;
 use std::f32::consts::TAU;

@@ -962,7 +962,7 @@ mod tests {
             &[1; 54],
             false,
         );
-        let mut random = crate::random::SplitMix64::new(7);
+        let mut random = dpp_runtime::random::SplitMix64::new(7);
         for round in 0..200 {
             let mut bytes = good.clone();
             for _ in 0..1 + round % 8 {

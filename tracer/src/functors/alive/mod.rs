@@ -5,8 +5,7 @@ use crate::functors::wgsl::{twin, vector_module, TwinParts};
 use crate::functors::RayColumns;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
 
 pub struct Alive {
@@ -16,20 +15,10 @@ pub struct Alive {
 impl Alive {
     pub fn new(ray: RecordId) -> Alive {
         Alive {
-            signature: Signature {
-                name: "alive",
-                kind: FunctorKind::Map,
-                inputs: vec![ArrayParam {
-                    name: "ray",
-                    ty: TypePattern::Exact(ElemType::Record(ray)),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "alive",
-                    ty: TypePattern::Exact(ElemType::Bool),
-                }],
-                named: vec![],
-                doc: "whether the ray is alive: tmax > 0",
-            },
+            signature: Signature::map("alive")
+                .input("ray", ElemType::Record(ray))
+                .output("alive", ElemType::Bool)
+                .doc("whether the ray is alive: tmax > 0"),
         }
     }
 }
@@ -42,10 +31,8 @@ impl Functor for Alive {
     /// `twin.wgsl`: `tmax > 0` on the bits.
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module()],
-            buffers: Vec::new(),
-            failures: Vec::new(),
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -11,10 +11,7 @@
 use crate::functors::wgsl::{f32_literal, twin, vector_module, TwinParts};
 use crate::shading::encode_srgb_in_place;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
-use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    Signature, TypePattern,
-};
+use dpp_runtime::{CallContext, Column, ColumnView, ElemType, Functor, FunctorError, Signature};
 use glam::Vec3;
 
 pub struct AntiAlias {
@@ -25,20 +22,10 @@ impl AntiAlias {
     #[allow(clippy::new_without_default)]
     pub fn new() -> AntiAlias {
         AntiAlias {
-            signature: Signature {
-                name: "antiAlias",
-                kind: FunctorKind::Group,
-                inputs: vec![ArrayParam {
-                    name: "color",
-                    ty: TypePattern::Exact(ElemType::Vec3),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "pixel",
-                    ty: TypePattern::Exact(ElemType::Vec3),
-                }],
-                named: vec![],
-                doc: "mean of each group of k linear colours (group: spp, 1 allowed), clamped to [0, 1] and sRGB-encoded for display",
-            },
+            signature: Signature::group("antiAlias")
+                .input("color", ElemType::Vec3)
+                .output("pixel", ElemType::Vec3)
+                .doc("mean of each group of k linear colours (group: spp, 1 allowed), clamped to [0, 1] and sRGB-encoded for display"),
         }
     }
 }
@@ -56,8 +43,8 @@ impl Functor for AntiAlias {
                 ("SRGB_EXPONENT", f32_literal(1.0 / 2.4)),
             ],
             modules: vec![vector_module()],
-            buffers: Vec::new(),
             failures: vec!["antiAlias: group must be at least 1".into()],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -11,8 +11,8 @@ use crate::functors::{RayRecord, RayWriter};
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, HostValue,
+    RecordId, Signature,
 };
 use glam::Vec3;
 
@@ -23,25 +23,18 @@ pub struct CameraRay {
 impl CameraRay {
     pub fn new(ray: RecordId) -> CameraRay {
         CameraRay {
-            signature: Signature {
-                name: "cameraRay",
-                kind: FunctorKind::Map,
-                inputs: vec![ArrayParam {
-                    name: "index",
-                    ty: TypePattern::Exact(ElemType::U32),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "ray",
-                    ty: TypePattern::Exact(ElemType::Record(ray)),
-                }],
-                named: vec![NamedParam {
-                    name: "spp",
-                    ty: HostType::Int,
-                    default: Some(HostValue::Int(1)),
-                    doc: "samples per pixel: 1 (pixel centre) or 4 (2x2 grid)",
-                }],
-                doc: "primary ray `index` of the camera (pixels in Morton order, spp samples each)",
-            },
+            signature: Signature::map("cameraRay")
+                .input("index", ElemType::U32)
+                .output("ray", ElemType::Record(ray))
+                .named(
+                    "spp",
+                    HostType::Int,
+                    Some(HostValue::Int(1)),
+                    "samples per pixel: 1 (pixel centre) or 4 (2x2 grid)",
+                )
+                .doc(
+                    "primary ray `index` of the camera (pixels in Morton order, spp samples each)",
+                ),
         }
     }
 }
@@ -56,7 +49,6 @@ impl Functor for CameraRay {
         let camera =
             request_resources::<TraceResources>(request, "cameraRay")?.camera_gpu_buffers();
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module()],
             buffers: vec![camera.camera, camera.morton_pixels],
             failures: vec![
@@ -64,6 +56,7 @@ impl Functor for CameraRay {
                 "cameraRay: a ray index is out of range for the camera's pixels x spp samples"
                     .into(),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

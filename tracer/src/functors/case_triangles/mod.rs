@@ -1,14 +1,11 @@
 //! `caseTriangles(case: u32) -> (count: u32)`: how many triangles marching
 //! cubes makes in a cell of this case (0 to 5), from the generated tables
-//! ([`crate::functors::isosurface::tables`]).
+//! ([`crate::marching_cubes_tables`]).
 
-use crate::functors::isosurface::tables::tables;
 use crate::functors::wgsl::{marching_cubes_module, twin, TwinParts};
+use crate::marching_cubes_tables::tables;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
-use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    Signature, TypePattern,
-};
+use dpp_runtime::{CallContext, Column, ColumnView, ElemType, Functor, FunctorError, Signature};
 
 pub struct CaseTriangles {
     signature: Signature,
@@ -17,20 +14,10 @@ pub struct CaseTriangles {
 impl CaseTriangles {
     pub fn new() -> CaseTriangles {
         CaseTriangles {
-            signature: Signature {
-                name: "caseTriangles",
-                kind: FunctorKind::Map,
-                inputs: vec![ArrayParam {
-                    name: "case",
-                    ty: TypePattern::Exact(ElemType::U32),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "count",
-                    ty: TypePattern::Exact(ElemType::U32),
-                }],
-                named: vec![],
-                doc: "the number of marching-cubes triangles (0..5) of a cell case",
-            },
+            signature: Signature::map("caseTriangles")
+                .input("case", ElemType::U32)
+                .output("count", ElemType::U32)
+                .doc("the number of marching-cubes triangles (0..5) of a cell case"),
         }
     }
 }
@@ -49,10 +36,9 @@ impl Functor for CaseTriangles {
     /// `twin.wgsl`, reading the generated tables.
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![marching_cubes_module()],
-            buffers: Vec::new(),
             failures: vec!["caseTriangles: a case is not a marching-cubes case (0..255)".into()],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

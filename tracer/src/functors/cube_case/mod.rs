@@ -8,8 +8,7 @@ use crate::functors::isosurface::{case_index, cell_origin, corner_values, level,
 use crate::functors::wgsl::{request_resources, twin, vector_module, volume_module, TwinParts};
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    HostType, NamedParam, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, Signature,
 };
 
 pub struct CubeCase {
@@ -19,25 +18,11 @@ pub struct CubeCase {
 impl CubeCase {
     pub fn new() -> CubeCase {
         CubeCase {
-            signature: Signature {
-                name: "cubeCase",
-                kind: FunctorKind::Map,
-                inputs: vec![ArrayParam {
-                    name: "cell",
-                    ty: TypePattern::Exact(ElemType::U32),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "case",
-                    ty: TypePattern::Exact(ElemType::U32),
-                }],
-                named: vec![NamedParam {
-                    name: "level",
-                    ty: HostType::Float,
-                    default: None,
-                    doc: "the isovalue; corners below it are inside",
-                }],
-                doc: "the marching-cubes case (0..255) of a volume cell: bit n set when corner n is below level",
-            },
+            signature: Signature::map("cubeCase")
+                .input("cell", ElemType::U32)
+                .output("case", ElemType::U32)
+                .named("level", HostType::Float, None, "the isovalue; corners below it are inside")
+                .doc("the marching-cubes case (0..255) of a volume cell: bit n set when corner n is below level"),
         }
     }
 }
@@ -59,13 +44,12 @@ impl Functor for CubeCase {
             .gpu_buffers()
             .map_err(|e| FunctorError::bad_input(format!("cubeCase: {e}")))?;
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module(), volume_module(&volume)],
-            buffers: Vec::new(),
             failures: vec![
                 "cubeCase: level must be a finite number".into(),
                 "cubeCase: a cell index is past the volume's last cell".into(),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

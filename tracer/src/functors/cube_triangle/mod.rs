@@ -10,7 +10,6 @@
 //! corners wind counter-clockwise seen from the side of higher values. See
 //! [`crate::functors::isosurface`] for the conventions.
 
-use crate::functors::isosurface::tables::tables;
 use crate::functors::isosurface::VolumeResources;
 use crate::functors::isosurface::{
     case_index, cell_origin, corner_values, edge_vertex, level, run_volume, TriangleRecord,
@@ -19,10 +18,10 @@ use crate::functors::isosurface::{
 use crate::functors::wgsl::{
     marching_cubes_module, request_resources, twin, vector_module, volume_module, TwinParts,
 };
+use crate::marching_cubes_tables::tables;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    HostType, NamedParam, RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, RecordId, Signature,
 };
 
 pub struct CubeTriangle {
@@ -32,31 +31,12 @@ pub struct CubeTriangle {
 impl CubeTriangle {
     pub fn new(triangle: RecordId) -> CubeTriangle {
         CubeTriangle {
-            signature: Signature {
-                name: "cubeTriangle",
-                kind: FunctorKind::Map,
-                inputs: vec![
-                    ArrayParam {
-                        name: "cell",
-                        ty: TypePattern::Exact(ElemType::U32),
-                    },
-                    ArrayParam {
-                        name: "lane",
-                        ty: TypePattern::Exact(ElemType::U32),
-                    },
-                ],
-                outputs: vec![ArrayParam {
-                    name: "tri",
-                    ty: TypePattern::Exact(ElemType::Record(triangle)),
-                }],
-                named: vec![NamedParam {
-                    name: "level",
-                    ty: HostType::Float,
-                    default: None,
-                    doc: "the isovalue (the same as cubeCase's)",
-                }],
-                doc: "triangle `lane` of a volume cell's marching-cubes surface at level: corners on the cell edges, gradient normals, interpolated scalars",
-            },
+            signature: Signature::map("cubeTriangle")
+                .input("cell", ElemType::U32)
+                .input("lane", ElemType::U32)
+                .output("tri", ElemType::Record(triangle))
+                .named("level", HostType::Float, None, "the isovalue (the same as cubeCase's)")
+                .doc("triangle `lane` of a volume cell's marching-cubes surface at level: corners on the cell edges, gradient normals, interpolated scalars"),
         }
     }
 }
@@ -72,18 +52,17 @@ impl Functor for CubeTriangle {
             .gpu_buffers()
             .map_err(|e| FunctorError::bad_input(format!("cubeTriangle: {e}")))?;
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![
                 vector_module(),
                 volume_module(&volume),
                 marching_cubes_module(),
             ],
-            buffers: Vec::new(),
             failures: vec![
                 "cubeTriangle: level must be a finite number".into(),
                 "cubeTriangle: a cell index is past the volume's last cell".into(),
                 "cubeTriangle: a lane is past the cell's triangles at this level".into(),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -13,8 +13,7 @@ use crate::functors::{write_hits, RayColumns};
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
 
 pub struct Intersect {
@@ -24,20 +23,10 @@ pub struct Intersect {
 impl Intersect {
     pub fn new(ray: RecordId, hit: RecordId) -> Intersect {
         Intersect {
-            signature: Signature {
-                name: "intersect",
-                kind: FunctorKind::Map,
-                inputs: vec![ArrayParam {
-                    name: "ray",
-                    ty: TypePattern::Exact(ElemType::Record(ray)),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "hit",
-                    ty: TypePattern::Exact(ElemType::Record(hit)),
-                }],
-                named: vec![],
-                doc: "closest hit of the ray with the scene (miss: t = inf, prim = 4294967295)",
-            },
+            signature: Signature::map("intersect")
+                .input("ray", ElemType::Record(ray))
+                .output("hit", ElemType::Record(hit))
+                .doc("closest hit of the ray with the scene (miss: t = inf, prim = 4294967295)"),
         }
     }
 }
@@ -53,8 +42,8 @@ impl Functor for Intersect {
         let parts = TwinParts {
             constants: vec![("MISS_PRIM", format!("{MISS_PRIM}u"))],
             modules: vec![vector_module(), bvh_module(scene.gpu_buffers())],
-            buffers: Vec::new(),
             failures: vec![stack_overflow_failure("intersect")],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

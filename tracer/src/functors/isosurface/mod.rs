@@ -7,11 +7,12 @@
 //! - the `Triangle` record, `Triangle { a: vec3, b: vec3, c: vec3, na: vec3,
 //!   nb: vec3, nc: vec3, sa: f32, sb: f32, sc: f32 }`: corners, unit vertex
 //!   normals and vertex scalars of one triangle;
-//! - [`tables`]: the marching-cubes tables, generated from the cube's topology;
+//! - [`crate::marching_cubes_tables`]: the marching-cubes tables, generated
+//!   from the cube's topology;
 //! - the per-cell geometry the functors `cubeCase`, `caseTriangles` and
 //!   `cubeTriangle` compute (see their modules);
 //! - [`mesh`]: turning the `Triangle` output into a [`crate::TriangleMesh`]
-//!   (welded or not) and writing it as OBJ or PLY.
+//!   (welded or not), which [`crate::mesh_write`] writes as OBJ or PLY.
 //!
 //! # Conventions
 //!
@@ -34,20 +35,16 @@
 //! vertices are bit-identical and the surface is watertight.
 
 pub mod mesh;
-pub mod tables;
 
-pub use mesh::{triangles_to_mesh, write_obj, write_ply, NotTriangles, TriangleColumns};
+pub use mesh::{triangles_to_mesh, NotTriangles, TriangleColumns};
 
-use crate::functors::wgsl::buffers::{ArcKeyedCache, VolumeGpuBuffers};
-use crate::functors::{case_triangles, cube_case, cube_triangle, record_fields_mut};
+use crate::functors::record_fields_mut;
+use crate::functors::wgsl::buffers::VolumeGpuBuffers;
+use crate::marching_cubes_tables::{corner_offset, EDGES};
 use crate::volume::Volume;
-use dpp_runtime::{
-    CallContext, Column, ElemType, FunctorError, FunctorLibrary, HostType, HostValue, RecordId,
-    RecordType, Uniforms,
-};
+use dpp_runtime::{CallContext, Column, FunctorError, HostType, HostValue, Uniforms};
 use glam::{UVec3, Vec3};
 use std::sync::Arc;
-use tables::{corner_offset, EDGES};
 
 /// The run's resources for the isosurface functors.
 #[derive(Clone, Debug)]
@@ -55,22 +52,11 @@ pub struct VolumeResources {
     pub volume: Arc<Volume>,
 }
 
-/// The GPU buffers of each live volume twins were built for. Process-wide and
-/// keyed by the volume's `Arc`, because users build [`VolumeResources`] with a
-/// struct literal, which leaves it no room for a cache of its own.
-static VOLUME_GPU_BUFFERS: ArcKeyedCache<Volume, VolumeGpuBuffers> = ArcKeyedCache::new();
-
 impl VolumeResources {
     /// The volume as the WGSL twins read it, built once per volume.
     pub fn gpu_buffers(&self) -> Result<VolumeGpuBuffers, FunctorError> {
-        VOLUME_GPU_BUFFERS.get_or_try_build(&self.volume, VolumeGpuBuffers::new)
+        VolumeGpuBuffers::of_volume(&self.volume)
     }
-}
-
-/// Frees the cached GPU copy of a volume that is gone (a volume can be large,
-/// and a run traces its isosurface after dropping it).
-pub(crate) fn release_gpu_buffers_of_dropped_volumes() {
-    VOLUME_GPU_BUFFERS.release_orphans();
 }
 
 /// The `volume.*` uniforms: `(record, field, type)`.
@@ -101,28 +87,6 @@ pub fn volume_uniforms(volume: &Volume) -> Uniforms {
     uniforms.set("volume", "min", HostValue::Float(min.into()));
     uniforms.set("volume", "max", HostValue::Float(max.into()));
     uniforms
-}
-
-/// Registers the `Triangle` record, declares the `volume.*` uniforms and
-/// registers `cubeCase`, `caseTriangles` and `cubeTriangle`. Returns the
-/// `Triangle` record's id.
-pub fn register_isosurface_functors(library: &mut FunctorLibrary) -> RecordId {
-    let triangle = library.records.register(RecordType {
-        name: "Triangle".into(),
-        fields: ["a", "b", "c", "na", "nb", "nc"]
-            .iter()
-            .map(|name| (name.to_string(), ElemType::Vec3))
-            .chain(["sa", "sb", "sc"].iter().map(|name| (name.to_string(), ElemType::F32)))
-            .collect(),
-        doc: "an isosurface triangle: corners a, b, c (counter-clockwise seen from higher values), unit vertex normals na, nb, nc (up the gradient), vertex scalars sa, sb, sc".into(),
-    });
-    for (record, field, ty) in VOLUME_UNIFORM_FIELDS {
-        library.uniforms.declare(record, field, ty);
-    }
-    library.register(Arc::new(cube_case::CubeCase::new()));
-    library.register(Arc::new(case_triangles::CaseTriangles::new()));
-    library.register(Arc::new(cube_triangle::CubeTriangle::new(triangle)));
-    triangle
 }
 
 /// One `Triangle` record.
@@ -267,6 +231,8 @@ pub(crate) fn edge_vertex(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::register_isosurface_functors;
+    use dpp_runtime::FunctorLibrary;
 
     fn volume(dims: UVec3, f: impl Fn(Vec3) -> f32) -> Volume {
         Volume::from_fn(dims, Vec3::ZERO, Vec3::new(0.5, 1.0, 2.0), |p, _| f(p))

@@ -11,8 +11,7 @@ use crate::scene::TraceResources;
 use crate::vector::unit_or_zero;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
 use glam::Vec3;
 
@@ -26,26 +25,11 @@ pub struct NormalColor {
 impl NormalColor {
     pub fn new(ray: RecordId, hit: RecordId) -> NormalColor {
         NormalColor {
-            signature: Signature {
-                name: "normalColor",
-                kind: FunctorKind::Map,
-                inputs: vec![
-                    ArrayParam {
-                        name: "ray",
-                        ty: TypePattern::Exact(ElemType::Record(ray)),
-                    },
-                    ArrayParam {
-                        name: "hit",
-                        ty: TypePattern::Exact(ElemType::Record(hit)),
-                    },
-                ],
-                outputs: vec![ArrayParam {
-                    name: "color",
-                    ty: TypePattern::Exact(ElemType::Vec3),
-                }],
-                named: vec![],
-                doc: "viewer-facing geometric normal of the hit as RGB (n*0.5+0.5); dark background on a miss",
-            },
+            signature: Signature::map("normalColor")
+                .input("ray", ElemType::Record(ray))
+                .input("hit", ElemType::Record(hit))
+                .output("color", ElemType::Vec3)
+                .doc("viewer-facing geometric normal of the hit as RGB (n*0.5+0.5); dark background on a miss"),
         }
     }
 }
@@ -64,8 +48,8 @@ impl Functor for NormalColor {
                 ("BACKGROUND", vec3_literal(BACKGROUND)),
             ],
             modules: vec![vector_module(), mesh_module(scene.gpu_buffers())],
-            buffers: Vec::new(),
             failures: vec!["normalColor: a hit names a triangle the scene does not have".into()],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -14,15 +14,16 @@
 //! rays, which `occluded` reports as not blocked.
 
 use crate::functors::wgsl::{
-    random_module, sampling_module, surface_module, twin, vector_module, TwinParts,
+    diagonal_failure, random_module, sampling_module, surface_module, twin, vector_module,
+    TwinParts,
 };
 use crate::functors::{
     named_f32, scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON,
 };
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, HostValue,
+    RecordId, Signature,
 };
 use glam::Vec3;
 use std::f32::consts::TAU;
@@ -34,25 +35,16 @@ pub struct OccRayGen {
 impl OccRayGen {
     pub fn new(surface: RecordId, ray: RecordId) -> OccRayGen {
         OccRayGen {
-            signature: Signature {
-                name: "occRayGen",
-                kind: FunctorKind::Expand,
-                inputs: vec![ArrayParam {
-                    name: "surf",
-                    ty: TypePattern::Exact(ElemType::Record(surface)),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "ray",
-                    ty: TypePattern::Exact(ElemType::Record(ray)),
-                }],
-                named: vec![NamedParam {
-                    name: "range",
-                    ty: HostType::Float,
-                    default: Some(HostValue::Float(0.05)),
-                    doc: "length of the occlusion rays as a fraction of the scene diagonal",
-                }],
-                doc: "lane j: a cosine-weighted hemisphere ray about the normal, hashed from (sample, depth, j); dead for a miss",
-            },
+            signature: Signature::expand("occRayGen")
+                .input("surf", ElemType::Record(surface))
+                .output("ray", ElemType::Record(ray))
+                .named(
+                    "range",
+                    HostType::Float,
+                    Some(HostValue::Float(0.05)),
+                    "length of the occlusion rays as a fraction of the scene diagonal",
+                )
+                .doc("lane j: a cosine-weighted hemisphere ray about the normal, hashed from (sample, depth, j); dead for a miss"),
         }
     }
 }
@@ -65,19 +57,17 @@ impl Functor for OccRayGen {
     /// `twin.wgsl`: the same hashed random numbers and hemisphere mapping.
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![
                 vector_module(),
                 random_module(),
                 sampling_module(),
                 surface_module(),
             ],
-            buffers: Vec::new(),
             failures: vec![
                 "occRayGen: range must be a finite number".into(),
-                "occRayGen: the scene.diagonal uniform is not a positive number (no scene loaded?)"
-                    .into(),
+                diagonal_failure("occRayGen"),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

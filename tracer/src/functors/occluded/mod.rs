@@ -9,8 +9,7 @@ use crate::functors::RayColumns;
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
 
 pub struct Occluded {
@@ -20,20 +19,10 @@ pub struct Occluded {
 impl Occluded {
     pub fn new(ray: RecordId) -> Occluded {
         Occluded {
-            signature: Signature {
-                name: "occluded",
-                kind: FunctorKind::Map,
-                inputs: vec![ArrayParam {
-                    name: "ray",
-                    ty: TypePattern::Exact(ElemType::Record(ray)),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "blocked",
-                    ty: TypePattern::Exact(ElemType::Bool),
-                }],
-                named: vec![],
-                doc: "whether any triangle lies on the ray with 0 < t < tmax",
-            },
+            signature: Signature::map("occluded")
+                .input("ray", ElemType::Record(ray))
+                .output("blocked", ElemType::Bool)
+                .doc("whether any triangle lies on the ray with 0 < t < tmax"),
         }
     }
 }
@@ -47,10 +36,9 @@ impl Functor for Occluded {
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let scene = &request_resources::<TraceResources>(request, "occluded")?.scene;
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module(), bvh_module(scene.gpu_buffers())],
-            buffers: Vec::new(),
             failures: vec![stack_overflow_failure("occluded")],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -12,13 +12,15 @@
 //! 0`, zero weight), so with `maxDepth` the pipeline traces at most `maxDepth`
 //! segments per camera ray (the camera ray included).
 
-use crate::functors::wgsl::{request_resources, surface_module, twin, vector_module, TwinParts};
+use crate::functors::wgsl::{
+    diagonal_failure, request_resources, surface_module, twin, vector_module, TwinParts,
+};
 use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, HostValue,
+    RecordId, Signature,
 };
 use glam::Vec3;
 
@@ -29,25 +31,16 @@ pub struct Reflect {
 impl Reflect {
     pub fn new(surface: RecordId, ray: RecordId) -> Reflect {
         Reflect {
-            signature: Signature {
-                name: "reflect",
-                kind: FunctorKind::Map,
-                inputs: vec![ArrayParam {
-                    name: "surf",
-                    ty: TypePattern::Exact(ElemType::Record(surface)),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "ray",
-                    ty: TypePattern::Exact(ElemType::Record(ray)),
-                }],
-                named: vec![NamedParam {
-                    name: "maxDepth",
-                    ty: HostType::Int,
-                    default: Some(HostValue::Int(3)),
-                    doc: "ray segments per camera ray: a reflection of depth >= maxDepth is dead",
-                }],
-                doc: "mirror reflection of a reflective hit (weight * reflectivity, depth + 1); dead otherwise or at maxDepth",
-            },
+            signature: Signature::map("reflect")
+                .input("surf", ElemType::Record(surface))
+                .output("ray", ElemType::Record(ray))
+                .named(
+                    "maxDepth",
+                    HostType::Int,
+                    Some(HostValue::Int(3)),
+                    "ray segments per camera ray: a reflection of depth >= maxDepth is dead",
+                )
+                .doc("mirror reflection of a reflective hit (weight * reflectivity, depth + 1); dead otherwise or at maxDepth"),
         }
     }
 }
@@ -62,14 +55,13 @@ impl Functor for Reflect {
         let shading =
             request_resources::<TraceResources>(request, "reflect")?.shading_gpu_buffers();
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module(), surface_module()],
             buffers: vec![shading.materials],
             failures: vec![
-                "reflect: the scene.diagonal uniform is not a positive number (no scene loaded?)"
-                    .into(),
+                diagonal_failure("reflect"),
                 "reflect: a surface has a material the scene does not have".into(),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

@@ -19,15 +19,16 @@
 //!   `surf.weight`.
 
 use crate::functors::wgsl::{
-    colormap_module, request_resources, surface_module, twin, vector_module, TwinParts,
+    colormap_module, diagonal_failure, request_resources, surface_module, twin, vector_module,
+    TwinParts,
 };
 use crate::functors::{named_f32, scene_diagonal, SurfaceColumns};
 use crate::scene::TraceResources;
 use crate::shading::{PointLight, MAX_LIGHTS};
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    HostType, HostValue, NamedParam, RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, HostValue,
+    RecordId, Signature,
 };
 use glam::Vec3;
 
@@ -38,43 +39,24 @@ pub struct Shader {
 impl Shader {
     pub fn new(surface: RecordId) -> Shader {
         Shader {
-            signature: Signature {
-                name: "shader",
-                kind: FunctorKind::Map,
-                inputs: vec![
-                    ArrayParam {
-                        name: "surf",
-                        ty: TypePattern::Exact(ElemType::Record(surface)),
-                    },
-                    ArrayParam {
-                        name: "occlusion",
-                        ty: TypePattern::Exact(ElemType::F32),
-                    },
-                    ArrayParam {
-                        name: "visible",
-                        ty: TypePattern::Exact(ElemType::U32),
-                    },
-                ],
-                outputs: vec![ArrayParam {
-                    name: "rgb",
-                    ty: TypePattern::Exact(ElemType::Vec3),
-                }],
-                named: vec![
-                    NamedParam {
-                        name: "ambient",
-                        ty: HostType::Float,
-                        default: Some(HostValue::Float(0.15)),
-                        doc: "strength of the ambient term, scaled by 1 - occlusion",
-                    },
-                    NamedParam {
-                        name: "falloff",
-                        ty: HostType::Float,
-                        default: Some(HostValue::Float(1.0)),
-                        doc: "k in the light attenuation intensity / (1 + k (d / scene.diagonal)^2); 0 turns it off",
-                    },
-                ],
-                doc: "Blinn-Phong: colour-mapped scalar times Kd, ambient scaled by 1 - occlusion, diffuse and specular from the visible lights; times (1 - reflectivity) and the ray weight (miss: background)",
-            },
+            signature: Signature::map("shader")
+                .input("surf", ElemType::Record(surface))
+                .input("occlusion", ElemType::F32)
+                .input("visible", ElemType::U32)
+                .output("rgb", ElemType::Vec3)
+                .named(
+                    "ambient",
+                    HostType::Float,
+                    Some(HostValue::Float(0.15)),
+                    "strength of the ambient term, scaled by 1 - occlusion",
+                )
+                .named(
+                    "falloff",
+                    HostType::Float,
+                    Some(HostValue::Float(1.0)),
+                    "k in the light attenuation intensity / (1 + k (d / scene.diagonal)^2); 0 turns it off",
+                )
+                .doc("Blinn-Phong: colour-mapped scalar times Kd, ambient scaled by 1 - occlusion, diffuse and specular from the visible lights; times (1 - reflectivity) and the ray weight (miss: background)"),
         }
     }
 }
@@ -94,8 +76,7 @@ impl Functor for Shader {
             failures: vec![
                 "shader: ambient must be a finite number".into(),
                 "shader: falloff must be a finite number".into(),
-                "shader: the scene.diagonal uniform is not a positive number (no scene loaded?)"
-                    .into(),
+                diagonal_failure("shader"),
                 "shader: a surface has a material the scene does not have".into(),
             ],
         };

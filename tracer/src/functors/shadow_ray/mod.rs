@@ -11,13 +11,14 @@
 //! the shader does not light anyway), gives a dead ray (`tmax = 0`), which
 //! `occluded` reports as not blocked.
 
-use crate::functors::wgsl::{request_resources, surface_module, twin, vector_module, TwinParts};
+use crate::functors::wgsl::{
+    diagonal_failure, request_resources, surface_module, twin, vector_module, TwinParts,
+};
 use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
 
 pub struct ShadowRay {
@@ -27,20 +28,10 @@ pub struct ShadowRay {
 impl ShadowRay {
     pub fn new(surface: RecordId, ray: RecordId) -> ShadowRay {
         ShadowRay {
-            signature: Signature {
-                name: "shadowRay",
-                kind: FunctorKind::Expand,
-                inputs: vec![ArrayParam {
-                    name: "surf",
-                    ty: TypePattern::Exact(ElemType::Record(surface)),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "ray",
-                    ty: TypePattern::Exact(ElemType::Record(ray)),
-                }],
-                named: vec![],
-                doc: "lane j: the ray from the surface point to light j (fanout: scene.lights); dead for a miss or a light behind the surface",
-            },
+            signature: Signature::expand("shadowRay")
+                .input("surf", ElemType::Record(surface))
+                .output("ray", ElemType::Record(ray))
+                .doc("lane j: the ray from the surface point to light j (fanout: scene.lights); dead for a miss or a light behind the surface"),
         }
     }
 }
@@ -55,15 +46,14 @@ impl Functor for ShadowRay {
         let shading =
             request_resources::<TraceResources>(request, "shadowRay")?.shading_gpu_buffers();
         let parts = TwinParts {
-            constants: Vec::new(),
             modules: vec![vector_module(), surface_module()],
             buffers: vec![shading.lights],
             failures: vec![
                 "shadowRay: the fanout is not the scene's number of lights; use fanout: scene.lights"
                     .into(),
-                "shadowRay: the scene.diagonal uniform is not a positive number (no scene loaded?)"
-                    .into(),
+                diagonal_failure("shadowRay"),
             ],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

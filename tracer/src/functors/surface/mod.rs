@@ -29,8 +29,7 @@ use crate::scene::TraceResources;
 use crate::vector::unit_or_zero;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
 use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    RecordId, Signature, TypePattern,
+    CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
 use glam::Vec3;
 
@@ -45,26 +44,11 @@ pub struct SurfaceFunctor {
 impl SurfaceFunctor {
     pub fn new(ray: RecordId, hit: RecordId, surface: RecordId) -> SurfaceFunctor {
         SurfaceFunctor {
-            signature: Signature {
-                name: "surface",
-                kind: FunctorKind::Map,
-                inputs: vec![
-                    ArrayParam {
-                        name: "ray",
-                        ty: TypePattern::Exact(ElemType::Record(ray)),
-                    },
-                    ArrayParam {
-                        name: "hit",
-                        ty: TypePattern::Exact(ElemType::Record(hit)),
-                    },
-                ],
-                outputs: vec![ArrayParam {
-                    name: "surf",
-                    ty: TypePattern::Exact(ElemType::Record(surface)),
-                }],
-                named: vec![],
-                doc: "the shading point of a hit: position, interpolated normal facing the ray, view vector, interpolated scalar, material, geometric normal facing the ray (miss: hit = false)",
-            },
+            signature: Signature::map("surface")
+                .input("ray", ElemType::Record(ray))
+                .input("hit", ElemType::Record(hit))
+                .output("surf", ElemType::Record(surface))
+                .doc("the shading point of a hit: position, interpolated normal facing the ray, view vector, interpolated scalar, material, geometric normal facing the ray (miss: hit = false)"),
         }
     }
 }
@@ -86,8 +70,8 @@ impl Functor for SurfaceFunctor {
                 ("MIN_VIEW_SINE", f32_literal(min_view_sine)),
             ],
             modules: vec![vector_module(), mesh_module(scene.gpu_buffers())],
-            buffers: Vec::new(),
             failures: vec!["surface: a hit names a triangle the scene does not have".into()],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

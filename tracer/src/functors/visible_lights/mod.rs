@@ -7,10 +7,7 @@
 use crate::functors::wgsl::{twin, TwinParts};
 use crate::shading::MAX_LIGHTS;
 use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
-use dpp_runtime::{
-    ArrayParam, CallContext, Column, ColumnView, ElemType, Functor, FunctorError, FunctorKind,
-    Signature, TypePattern,
-};
+use dpp_runtime::{CallContext, Column, ColumnView, ElemType, Functor, FunctorError, Signature};
 
 pub struct VisibleLights {
     signature: Signature,
@@ -20,20 +17,10 @@ impl VisibleLights {
     #[allow(clippy::new_without_default)]
     pub fn new() -> VisibleLights {
         VisibleLights {
-            signature: Signature {
-                name: "visibleLights",
-                kind: FunctorKind::Group,
-                inputs: vec![ArrayParam {
-                    name: "blocked",
-                    ty: TypePattern::Exact(ElemType::Bool),
-                }],
-                outputs: vec![ArrayParam {
-                    name: "mask",
-                    ty: TypePattern::Exact(ElemType::U32),
-                }],
-                named: vec![],
-                doc: "bit j set when light j of the group is not blocked (group: scene.lights, at most 32)",
-            },
+            signature: Signature::group("visibleLights")
+                .input("blocked", ElemType::Bool)
+                .output("mask", ElemType::U32)
+                .doc("bit j set when light j of the group is not blocked (group: scene.lights, at most 32)"),
         }
     }
 }
@@ -47,11 +34,10 @@ impl Functor for VisibleLights {
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let parts = TwinParts {
             constants: vec![("MAX_LIGHTS", format!("{MAX_LIGHTS}u"))],
-            modules: Vec::new(),
-            buffers: Vec::new(),
             failures: vec![format!(
                 "visibleLights: the group must be 1 to {MAX_LIGHTS} lights (a mask holds {MAX_LIGHTS})"
             )],
+            ..TwinParts::default()
         };
         twin(&self.signature, request, include_str!("twin.wgsl"), parts)
     }

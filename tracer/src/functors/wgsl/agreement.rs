@@ -10,54 +10,39 @@
 //! tolerance. Run with `--nocapture` for the largest differences measured.
 
 use crate::camera::{Camera, CameraSetup};
-use crate::functors::isosurface::{register_isosurface_functors, volume_uniforms, VolumeResources};
+use crate::functors::isosurface::{volume_uniforms, VolumeResources};
 use crate::functors::test_support::{
     hit_column, ray, ray_column, read_surfaces, surface_column, Fixture,
 };
 use crate::functors::{RayRecord, SurfaceRecord};
 use crate::mesh::TriangleMesh;
+use crate::register_isosurface_functors;
 use crate::scene::TraceScene;
 use crate::shading::{Material, MeshMaterials, PointLight};
 use crate::volume::Volume;
+use dpp_gpu::agreement::{
+    both_fail, cell_names, cell_text, compare_cells, Differences, Report, SplitMix64, Tolerance,
+    Within,
+};
 use dpp_gpu::{gpu_for_tests, run_functor_gpu, GpuContext, GpuRunContext};
-use dpp_runtime::column::{ulp_distance, Scalar as Cell};
+use dpp_runtime::column::Scalar as Cell;
 use dpp_runtime::{
-    CallContext, Column, ElemType, FunctorError, FunctorLibrary, HostValue, RecordRegistry,
-    TypePattern, Uniforms,
+    CallContext, Column, FunctorError, FunctorLibrary, HostValue, TypePattern, Uniforms,
 };
 use glam::{UVec3, Vec3};
 use std::any::Any;
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeSet;
 use std::fmt::Write;
 use std::sync::Arc;
 
 // ---------------------------------------------------------------------------
 // Tolerances
 
-/// How closely a float of the GPU must match the CPU's. NaN matches any NaN
-/// and nothing else; infinities match only themselves; finite values agree
-/// when `|gpu - cpu| <= max(abs, rel * max(|cpu|, |gpu|))`. `EXACT` wants
-/// every bit.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Tol {
-    rel: f32,
-    abs: f32,
-}
-
-const EXACT: Tol = Tol { rel: 0.0, abs: 0.0 };
-
-/// A tolerance and why it is enough.
-#[derive(Clone, Copy, Debug)]
-struct Within {
-    tol: Tol,
-    why: &'static str,
-}
-
 /// Relative 1e-5 (84 ULP), or absolute `abs` where cancellation leaves a
 /// value near 0.
 const fn within(abs: f32, why: &'static str) -> Within {
     Within {
-        tol: Tol { rel: 1e-5, abs },
+        tolerance: Tolerance::Relative { rel: 1e-5, abs },
         why,
     }
 }
@@ -107,7 +92,7 @@ const HEMISPHERE: Within = within(
     "sin/cos of a hashed angle: WGSL promises only 2^-11 absolute; lavapipe is within 2.4e-7, 1e-5 leaves 40x room",
 );
 const SHADER: Within = Within {
-    tol: Tol {
+    tolerance: Tolerance::Relative {
         rel: 1e-4,
         abs: 1e-6,
     },
@@ -122,23 +107,13 @@ const MARCHING: Within = within(
     "p0 + (p1 - p0) * t with t from a / (2.5 ULP) on positions up to 6, normalised gradients",
 );
 const INTEGERS: Within = Within {
-    tol: EXACT,
+    tolerance: Tolerance::Exact,
     why: "integers, bools, and floats copied or from exact table lookups",
 };
 const DEAD: Within = Within {
-    tol: EXACT,
+    tolerance: Tolerance::Exact,
     why: "dead rays make misses: constants and copies",
 };
-
-fn floats_agree(cpu: f32, gpu: f32, tol: Tol) -> bool {
-    if cpu.to_bits() == gpu.to_bits() || (cpu.is_nan() && gpu.is_nan()) {
-        return true;
-    }
-    if tol == EXACT || !cpu.is_finite() || !gpu.is_finite() {
-        return false;
-    }
-    (cpu - gpu).abs() <= tol.abs.max(tol.rel * cpu.abs().max(gpu.abs()))
-}
 
 // ---------------------------------------------------------------------------
 // Where a case runs
@@ -461,38 +436,12 @@ fn curved_env() -> Env {
     Env::trace("curved", fixture, Some(camera))
 }
 
-/// A small deterministic generator (SplitMix64).
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    fn u32(&mut self) -> u32 {
-        (self.next() >> 32) as u32
-    }
-
-    /// In [0, 1).
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    fn pick<T: Copy>(&mut self, values: &[T]) -> T {
-        values[(self.next() % values.len() as u64) as usize]
-    }
-
-    /// A unit vector, roughly uniform.
-    fn direction(&mut self) -> Vec3 {
-        loop {
-            let v = Vec3::new(self.unit(), self.unit(), self.unit()) * 2.0 - 1.0;
-            if (0.01..=1.0).contains(&v.length_squared()) {
-                return v.normalize();
-            }
+/// A unit vector, roughly uniform.
+fn direction(rng: &mut SplitMix64) -> Vec3 {
+    loop {
+        let v = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
+        if (0.01..=1.0).contains(&v.length_squared()) {
+            return v.normalize();
         }
     }
 }
@@ -617,7 +566,7 @@ fn edge_rays(exact_division: bool) -> Vec<RayRecord> {
 /// geometric normal, exactly ±z (the sign of -0 picks the frame), at a light,
 /// with NaN or infinite scalars, every material, depths up to `u32::MAX`;
 /// and misses.
-fn synthetic_surfaces(env: &Env, rng: &mut Rng) -> Vec<SurfaceRecord> {
+fn synthetic_surfaces(env: &Env, rng: &mut SplitMix64) -> Vec<SurfaceRecord> {
     let resources = env.trace_resources();
     let (center, diagonal) = (
         resources.scene.bounds.center(),
@@ -646,13 +595,17 @@ fn synthetic_surfaces(env: &Env, rng: &mut Rng) -> Vec<SurfaceRecord> {
                 center
                     + diagonal
                         * 0.5
-                        * Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5)
+                        * Vec3::new(
+                            rng.next_f32() - 0.5,
+                            rng.next_f32() - 0.5,
+                            rng.next_f32() - 0.5,
+                        )
             }
         };
         let normal = normals[i % normals.len()];
         let geometric = geometrics[i / normals.len() % geometrics.len()];
         let view = if i % 3 == 0 {
-            rng.direction()
+            direction(rng)
         } else {
             (position - normal).normalize()
         };
@@ -663,8 +616,8 @@ fn synthetic_surfaces(env: &Env, rng: &mut Rng) -> Vec<SurfaceRecord> {
             scalar: rng.pick(&scalars),
             material: i as u32 % materials,
             hit: i % 11 != 4,
-            sample: rng.u32(),
-            weight: Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 1.5,
+            sample: rng.next_u32(),
+            weight: Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 1.5,
             depth: rng.pick(&depths),
             geometric,
         });
@@ -695,11 +648,11 @@ const COLOR_VALUES: [f32; 17] = [
     0.7,
 ];
 
-fn colors(rng: &mut Rng, n: usize) -> Column {
+fn colors(rng: &mut SplitMix64, n: usize) -> Column {
     Column::Vec3(
         (0..n)
             .map(|i| match i % 3 {
-                0 => Vec3::new(rng.unit(), rng.unit(), rng.unit()),
+                0 => Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()),
                 _ => Vec3::new(
                     rng.pick(&COLOR_VALUES),
                     rng.pick(&COLOR_VALUES),
@@ -735,7 +688,7 @@ fn triangle_lanes(env: &Env, level: f32) -> (Column, Column) {
 /// The cases; see [`edge_rays`] and [`hit_tolerance`] for `exact_division`.
 fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
     let (simple, wide, curved) = (&envs.simple, &envs.wide, &envs.curved);
-    let mut rng = Rng(0x5eed);
+    let mut rng = SplitMix64::new(0x5eed);
     let mut cases = Vec::new();
     let pixels = |env: &Env| env.trace_resources().camera.camera.pixels() as usize;
     let lights = |env: &Env| env.trace_resources().shading.lights().len();
@@ -1080,7 +1033,7 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
             .map(|i| match i % 4 {
                 0 => u32::MAX,
                 1 => 0,
-                _ => rng.u32(),
+                _ => rng.next_u32(),
             })
             .collect(),
     );
@@ -1206,7 +1159,9 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
             "visibleLights",
             &format!("random flags, group {k}"),
             &[&Column::Bool(
-                (0..k * 100).map(|_| rng.u32().is_multiple_of(3)).collect(),
+                (0..k * 100)
+                    .map(|_| rng.next_u32().is_multiple_of(3))
+                    .collect(),
             )],
             &[],
             k,
@@ -1325,91 +1280,9 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
 // ---------------------------------------------------------------------------
 // Running and comparing
 
-/// The names of the cells of an element of type `ty`, as [`cells`] lists them.
-fn cell_names(ty: ElemType, records: &RecordRegistry, prefix: &str, out: &mut Vec<String>) {
-    let components = |n: usize, out: &mut Vec<String>| {
-        out.extend(
-            ["x", "y", "z", "w"][..n]
-                .iter()
-                .map(|c| format!("{prefix}.{c}")),
-        )
-    };
-    match ty {
-        ElemType::Vec2 => components(2, out),
-        ElemType::Vec3 => components(3, out),
-        ElemType::Vec4 => components(4, out),
-        ElemType::Record(id) => {
-            for (name, field) in &records.get(id).fields {
-                let name = match prefix {
-                    "" => name.clone(),
-                    _ => format!("{prefix}.{name}"),
-                };
-                cell_names(*field, records, &name, out);
-            }
-        }
-        _ => out.push(match prefix {
-            "" => "value".into(),
-            _ => prefix.into(),
-        }),
-    }
-}
-
-fn cell_text(cell: Cell) -> String {
-    match cell {
-        Cell::Int(x) => x.to_string(),
-        Cell::Float(x) => format!("{x:?}"),
-    }
-}
-
-/// The largest differences seen, per functor and output field.
-#[derive(Default)]
-struct Stats {
-    fields: BTreeMap<(&'static str, String), FieldStats>,
-}
-
-#[derive(Default)]
-struct FieldStats {
-    compared: usize,
-    differing: usize,
-    max_ulps: u64,
-    max_abs: f32,
-    max_rel: f32,
-}
-
-impl Stats {
-    fn record(&mut self, functor: &'static str, field: &str, cpu: f32, gpu: f32) {
-        let stats = self.fields.entry((functor, field.to_string())).or_default();
-        stats.compared += 1;
-        if cpu.to_bits() == gpu.to_bits() || !cpu.is_finite() || !gpu.is_finite() {
-            return;
-        }
-        stats.differing += 1;
-        let abs = (cpu - gpu).abs();
-        stats.max_ulps = stats.max_ulps.max(ulp_distance(cpu, gpu));
-        stats.max_abs = stats.max_abs.max(abs);
-        stats.max_rel = stats.max_rel.max(abs / cpu.abs().max(gpu.abs()));
-    }
-
-    fn table(&self) -> String {
-        let mut text = String::from(
-            "largest CPU/GPU differences of float fields (fields not listed agree in every bit):\n",
-        );
-        for ((functor, field), s) in &self.fields {
-            if s.differing > 0 {
-                let _ = writeln!(
-                    text,
-                    "  {functor:14} {field:14} {:6} of {:7} differ; max {:4} ULP, abs {:.2e}, rel {:.2e}",
-                    s.differing, s.compared, s.max_ulps, s.max_abs, s.max_rel
-                );
-            }
-        }
-        text
-    }
-}
-
 /// Runs `case` on both backends and compares; the disagreements, described
 /// with the input elements that produced them.
-fn check(gpu: &GpuContext, case: &Case<'_>, stats: &mut Stats) -> Result<(), String> {
+fn check(gpu: &GpuContext, case: &Case<'_>, differences: &mut Differences) -> Result<(), String> {
     let env = case.env;
     let inputs: Vec<&Column> = case.inputs.iter().collect();
     let cpu = env.cpu(case.functor, &inputs, &case.named, case.group);
@@ -1419,16 +1292,7 @@ fn check(gpu: &GpuContext, case: &Case<'_>, stats: &mut Stats) -> Result<(), Str
         case.functor, case.what, env.name, case.named, case.group
     );
     match (case.expect, cpu, on_gpu) {
-        (Expect::Fail(text), Err(cpu), Err(gpu))
-            if cpu.message.contains(text) && gpu.contains(text) =>
-        {
-            Ok(())
-        }
-        (Expect::Fail(text), cpu, gpu) => Err(format!(
-            "{label}: both backends should fail with `{text}`; CPU: {:?}, GPU: {:?}",
-            cpu.err(),
-            gpu.err()
-        )),
+        (Expect::Fail(text), cpu, gpu) => both_fail(&label, text, cpu.map_err(|e| e.message), gpu),
         (
             Expect::Agree {
                 within,
@@ -1437,8 +1301,15 @@ fn check(gpu: &GpuContext, case: &Case<'_>, stats: &mut Stats) -> Result<(), Str
             },
             Ok(cpu),
             Ok(gpu),
-        ) => compare(case, &cpu, &gpu, within.tol, (prims, edge_ties), stats)
-            .map_err(|e| format!("{label}, {:?} ({}):\n{e}", within.tol, within.why)),
+        ) => compare(
+            case,
+            &cpu,
+            &gpu,
+            within.tolerance,
+            (prims, edge_ties),
+            differences,
+        )
+        .map_err(|e| format!("{label}, {:?} ({}):\n{e}", within.tolerance, within.why)),
         (_, cpu, gpu) => Err(format!("{label}: CPU {:?}, GPU {:?}", cpu.err(), gpu.err())),
     }
 }
@@ -1455,8 +1326,7 @@ fn inputs_at(case: &Case<'_>, i: usize) -> String {
     let records = &case.env.library.records;
     let mut text = String::new();
     for (n, column) in case.inputs.iter().enumerate() {
-        let mut names = Vec::new();
-        cell_names(column.elem_type(), records, "", &mut names);
+        let names = cell_names(column.elem_type(), records);
         for j in range.clone() {
             let mut values = Vec::new();
             column.scalars_of(j, &mut values);
@@ -1475,9 +1345,9 @@ fn compare(
     case: &Case<'_>,
     cpu: &Column,
     gpu: &Column,
-    tol: Tol,
+    tolerance: Tolerance,
     (prims, edge_ties): (f64, bool),
-    stats: &mut Stats,
+    differences: &mut Differences,
 ) -> Result<(), String> {
     if cpu.elem_type() != gpu.elem_type() || cpu.len() != gpu.len() {
         return Err(format!(
@@ -1488,8 +1358,7 @@ fn compare(
             gpu.elem_type()
         ));
     }
-    let mut names = Vec::new();
-    cell_names(cpu.elem_type(), &case.env.library.records, "", &mut names);
+    let names = cell_names(cpu.elem_type(), &case.env.library.records);
     let prim = names.iter().position(|name| name == "prim");
     let t = names.iter().position(|name| name == "t");
     let mut other_triangle = Vec::new();
@@ -1504,7 +1373,9 @@ fn compare(
         if let Some(p) = prim {
             if a[p] != b[p] {
                 let same_t = t.is_some_and(|t| match (a[t], b[t]) {
-                    (Cell::Float(x), Cell::Float(y)) => x.is_finite() && floats_agree(x, y, tol),
+                    (Cell::Float(x), Cell::Float(y)) => {
+                        x.is_finite() && tolerance.floats_agree(x, y, false)
+                    }
                     _ => false,
                 });
                 if edge_ties && same_t {
@@ -1515,24 +1386,7 @@ fn compare(
                 continue;
             }
         }
-        let mut differing = Vec::new();
-        for (f, (x, y)) in a.iter().zip(&b).enumerate() {
-            let agrees = match (*x, *y) {
-                (Cell::Float(x), Cell::Float(y)) => {
-                    stats.record(case.functor, &names[f], x, y);
-                    floats_agree(x, y, tol)
-                }
-                (x, y) => x == y,
-            };
-            if !agrees {
-                differing.push(format!(
-                    "{} is {} on the CPU, {} on the GPU",
-                    names[f],
-                    cell_text(*x),
-                    cell_text(*y)
-                ));
-            }
-        }
+        let differing = compare_cells(&a, &b, &names, tolerance, false, differences, case.functor);
         if !differing.is_empty() {
             disagreements.push((i, differing.join("; ")));
         }
@@ -1609,7 +1463,7 @@ fn divides_exactly(gpu: &GpuContext) -> bool {
         resources: &(),
         profile: false,
     };
-    let mut random = crate::random::SplitMix64::new(17);
+    let mut random = dpp_runtime::random::SplitMix64::new(17);
     let (a, b): (Vec<f32>, Vec<f32>) = (0..4096)
         .map(|_| (random.range(-4.0, 4.0), random.range(0.1, 4.0)))
         .unzip();
@@ -1647,7 +1501,7 @@ fn rays_at_a_closed_meshs_vertices_and_edges_all_hit_on_the_gpu_at(factor: f32) 
     let scene = TraceScene::new(scaled).unwrap();
     let env = Env::trace("cube", Fixture::with_scene(scene), None);
     let Some(gpu) = gpu_for_tests() else { return };
-    let mut random = crate::random::SplitMix64::new(23);
+    let mut random = dpp_runtime::random::SplitMix64::new(23);
     let mut rays = Vec::new();
     for &target in &targets {
         let outward = box_outward(target, &bounds);
@@ -1717,17 +1571,10 @@ fn every_twin_agrees_with_its_rust_code() {
         eprintln!("the GPU's f32 division is not correctly rounded (WGSL allows 2.5 ULP)");
         self::cases(&envs, false)
     };
-    let mut stats = Stats::default();
-    let failures: Vec<String> = cases
-        .iter()
-        .filter_map(|case| check(gpu, case, &mut stats).err())
-        .collect();
-    eprintln!("{} cases\n{}", cases.len(), stats.table());
-    assert!(
-        failures.is_empty(),
-        "{} of {} cases disagree:\n{}",
-        failures.len(),
-        cases.len(),
-        failures.join("\n")
-    );
+    let mut report = Report::default();
+    for case in &cases {
+        let failure = check(gpu, case, &mut report.differences).err();
+        report.case(failure);
+    }
+    report.assert_agreement();
 }

@@ -23,16 +23,16 @@
 //! | `tracer_mc_edge_corners` | `array<u32>` | 12: `lo \| hi << 8` |
 
 use crate::bvh::Bvh;
+use crate::cache::ArcKeyedCache;
 use crate::camera::{Camera, CameraSetup};
-use crate::functors::isosurface::tables::{tables, EDGES, MAX_CELL_TRIANGLES};
-use crate::scene::TraceScene;
-use crate::shading::Shading;
+use crate::marching_cubes_tables::{tables, EDGES, MAX_CELL_TRIANGLES};
+use crate::mesh::TriangleMesh;
+use crate::shading::{MeshMaterials, Shading};
 use crate::volume::Volume;
 use dpp_runtime::wgsl::GpuBuffer;
 use dpp_runtime::FunctorError;
 use glam::Vec3;
-use std::fmt;
-use std::sync::{Arc, Mutex, OnceLock, PoisonError, Weak};
+use std::sync::{Arc, OnceLock};
 
 fn buffer(name: &'static str, wgsl_type: &'static str, words: Vec<u32>) -> GpuBuffer {
     GpuBuffer {
@@ -60,14 +60,12 @@ pub struct SceneGpuBuffers {
 }
 
 impl SceneGpuBuffers {
-    pub fn new(scene: &TraceScene) -> SceneGpuBuffers {
-        let bvh: &Bvh = &scene.bvh;
-        let mesh = &scene.mesh;
+    pub fn new(mesh: &TriangleMesh, bvh: &Bvh, materials: &MeshMaterials) -> SceneGpuBuffers {
         let mesh_triangles = mesh
             .triangles
             .iter()
             .enumerate()
-            .flat_map(|(prim, &[a, b, c])| [a, b, c, scene.triangle_material(prim as u32)])
+            .flat_map(|(prim, &[a, b, c])| [a, b, c, materials.triangle_material(prim as u32)])
             .collect();
         // A mesh without normals interpolates to zero (the face normal is used);
         // without scalars the scalar is y, whose interpolation is the hit's y
@@ -220,7 +218,24 @@ pub struct VolumeGpuBuffers {
     pub values: GpuBuffer,
 }
 
+/// The GPU buffers of each live volume twins were built for. Process-wide and
+/// keyed by the volume's `Arc`, because users build the isosurface functors'
+/// `VolumeResources` with a struct literal, which leaves it no room for a
+/// cache of its own.
+static VOLUME_GPU_BUFFERS: ArcKeyedCache<Volume, VolumeGpuBuffers> = ArcKeyedCache::new();
+
+/// Frees the cached GPU copy of a volume that is gone (a volume can be large,
+/// and a run traces its isosurface after dropping it).
+pub(crate) fn release_gpu_buffers_of_dropped_volumes() {
+    VOLUME_GPU_BUFFERS.release_orphans();
+}
+
 impl VolumeGpuBuffers {
+    /// The buffers of `volume`, built once per volume (see [`VolumeGpuBuffers::new`]).
+    pub fn of_volume(volume: &Arc<Volume>) -> Result<VolumeGpuBuffers, FunctorError> {
+        VOLUME_GPU_BUFFERS.get_or_try_build(volume, VolumeGpuBuffers::new)
+    }
+
     /// Fails for a volume whose samples do not match its dimensions (as the
     /// CPU functors do) or whose sample indices do not fit the GPU's `u32`.
     pub fn new(volume: &Volume) -> Result<VolumeGpuBuffers, FunctorError> {
@@ -294,106 +309,5 @@ impl MarchingCubesGpuBuffers {
                 edge_corners: buffer("tracer_mc_edge_corners", "array<u32>", edges),
             }
         })
-    }
-}
-
-/// A value built on first use; `Debug` shows only whether it is built (GPU
-/// words are long).
-#[derive(Clone)]
-pub struct BuiltOnce<T>(OnceLock<T>);
-
-impl<T> Default for BuiltOnce<T> {
-    fn default() -> Self {
-        BuiltOnce(OnceLock::new())
-    }
-}
-
-impl<T> BuiltOnce<T> {
-    pub fn get_or_init(&self, build: impl FnOnce() -> T) -> &T {
-        self.0.get_or_init(build)
-    }
-}
-
-impl<T> fmt::Debug for BuiltOnce<T> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(if self.0.get().is_some() {
-            "BuiltOnce(built)"
-        } else {
-            "BuiltOnce(not built)"
-        })
-    }
-}
-
-/// Values built from the `Arc<K>`s they describe, each kept while its `Arc`
-/// lives: for fields that are replaced rather than changed in place
-/// (`Arc::make_mut` on a shared value, or with this cache's weak reference
-/// alive, moves the value to a new allocation, so a changed value is never
-/// mistaken for the one a value was built from).
-pub struct ArcKeyedCache<K, V> {
-    entries: Mutex<Vec<(Weak<K>, V)>>,
-}
-
-impl<K, V: Clone> ArcKeyedCache<K, V> {
-    pub fn get_or_build(&self, key: &Arc<K>, build: impl FnOnce(&K) -> V) -> V {
-        match self.get_or_try_build(key, |k| Ok::<V, std::convert::Infallible>(build(k))) {
-            Ok(value) => value,
-            Err(never) => match never {},
-        }
-    }
-
-    pub fn get_or_try_build<E>(
-        &self,
-        key: &Arc<K>,
-        build: impl FnOnce(&K) -> Result<V, E>,
-    ) -> Result<V, E> {
-        // A panic while building leaves no entry behind; the lock itself is fine.
-        let mut entries = self.entries.lock().unwrap_or_else(PoisonError::into_inner);
-        entries.retain(|(built_from, _)| built_from.strong_count() > 0);
-        // A weak reference keeps its allocation, so no other value gets its address.
-        if let Some((_, value)) = entries
-            .iter()
-            .find(|(built_from, _)| std::ptr::eq(built_from.as_ptr(), Arc::as_ptr(key)))
-        {
-            return Ok(value.clone());
-        }
-        let value = build(key)?;
-        entries.push((Arc::downgrade(key), value.clone()));
-        Ok(value)
-    }
-}
-
-impl<K, V> ArcKeyedCache<K, V> {
-    pub const fn new() -> ArcKeyedCache<K, V> {
-        ArcKeyedCache {
-            entries: Mutex::new(Vec::new()),
-        }
-    }
-
-    /// Forgets the values whose `Arc`s are gone.
-    pub fn release_orphans(&self) {
-        let mut entries = self.entries.lock().unwrap_or_else(PoisonError::into_inner);
-        entries.retain(|(built_from, _)| built_from.strong_count() > 0);
-    }
-}
-
-impl<K, V> Default for ArcKeyedCache<K, V> {
-    fn default() -> Self {
-        ArcKeyedCache::new()
-    }
-}
-
-impl<K, V: Clone> Clone for ArcKeyedCache<K, V> {
-    fn clone(&self) -> Self {
-        let entries = self.entries.lock().unwrap_or_else(PoisonError::into_inner);
-        ArcKeyedCache {
-            entries: Mutex::new(entries.clone()),
-        }
-    }
-}
-
-impl<K, V> fmt::Debug for ArcKeyedCache<K, V> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let entries = self.entries.lock().unwrap_or_else(PoisonError::into_inner);
-        write!(f, "ArcKeyedCache({} built)", entries.len())
     }
 }

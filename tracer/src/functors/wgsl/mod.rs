@@ -13,8 +13,8 @@
 pub mod buffers;
 
 use crate::bvh::Bvh;
-use crate::functors::isosurface::tables::MAX_CELL_TRIANGLES;
 use crate::functors::SURFACE_EPSILON;
+use crate::marching_cubes_tables::MAX_CELL_TRIANGLES;
 use buffers::{MarchingCubesGpuBuffers, SceneGpuBuffers, ShadingGpuBuffers, VolumeGpuBuffers};
 use dpp_runtime::wgsl::{GpuBuffer, WgslModule, WgslRequest, WgslTwin};
 use dpp_runtime::{FunctorError, Signature, TypePattern};
@@ -46,6 +46,11 @@ pub(crate) fn stack_overflow_failure(functor: &str) -> String {
         "{functor}: the BVH traversal needed more than {} stack entries",
         Bvh::gpu_max_stack_depth()
     )
+}
+
+/// The failure of a twin that found no positive `scene.diagonal` uniform.
+pub(crate) fn diagonal_failure(functor: &str) -> String {
+    format!("{functor}: the scene.diagonal uniform is not a positive number (no scene loaded?)")
 }
 
 /// `template` with each `$NAME` of `values` replaced (longest names first, so
@@ -237,7 +242,9 @@ pub(crate) fn request_resources<'a, T: Any>(
     })
 }
 
-/// What a functor's twin is made of besides its template.
+/// What a functor's twin is made of besides its template (the parts a twin
+/// does not need left at their empty defaults).
+#[derive(Default)]
 pub(crate) struct TwinParts<'a> {
     /// `$NAME` values besides `$FUNCTION`.
     pub constants: Vec<(&'a str, String)>,
@@ -278,7 +285,7 @@ pub(crate) fn twin(
         )));
     }
     // Memory of a volume no run holds any more goes at the next twin built.
-    crate::functors::isosurface::release_gpu_buffers_of_dropped_volumes();
+    buffers::release_gpu_buffers_of_dropped_volumes();
     let mut values = parts.constants;
     values.push(("FUNCTION", request.function.to_string()));
     let mut modules: Vec<WgslModule> = Vec::new();

@@ -2,14 +2,13 @@
 //! resources of the test fixture, alone and all in one shader; the buffers
 //! hold what the CPU reads, in the documented layouts, built once.
 
-use super::buffers::{
-    ArcKeyedCache, CameraFrame, MarchingCubesGpuBuffers, SceneGpuBuffers, ShadingGpuBuffers,
-};
+use super::buffers::{CameraFrame, MarchingCubesGpuBuffers, SceneGpuBuffers, ShadingGpuBuffers};
 use super::{f32_literal, instantiate};
 use crate::camera::{sample_offset, Camera};
-use crate::functors::isosurface::tables::tables;
-use crate::functors::isosurface::{register_isosurface_functors, VolumeResources};
+use crate::functors::isosurface::VolumeResources;
 use crate::functors::test_support::{checked_twin, Fixture};
+use crate::marching_cubes_tables::tables;
+use crate::register_isosurface_functors;
 use crate::shading::PointLight;
 use crate::volume::generate;
 use dpp_gpu::validate_wgsl;
@@ -431,23 +430,4 @@ fn literals_and_templates() {
     );
     let missing = std::panic::catch_unwind(|| instantiate("$NOPE", &[]));
     assert!(missing.is_err());
-}
-
-#[test]
-fn the_arc_keyed_cache_keeps_one_value_per_live_arc() {
-    let cache = ArcKeyedCache::<u32, Arc<u32>>::new();
-    let mut first = Arc::new(1);
-    let second = Arc::new(2);
-    let built = cache.get_or_build(&first, |k| Arc::new(k * 10));
-    assert!(Arc::ptr_eq(
-        &built,
-        &cache.get_or_build(&first, |_| unreachable!())
-    ));
-    assert_eq!(*cache.get_or_build(&second, |k| Arc::new(k * 10)), 20);
-    // A change through `make_mut` moves the value, so it is built anew.
-    *Arc::make_mut(&mut first) = 3;
-    assert_eq!(*cache.get_or_build(&first, |k| Arc::new(k * 10)), 30);
-    drop(second);
-    cache.release_orphans();
-    assert_eq!(format!("{cache:?}"), "ArcKeyedCache(1 built)");
 }
