@@ -3,6 +3,8 @@
 //! Exit status (docs/language.md §5): 0 on success, 2 on input errors (a malformed
 //! pipeline, bad arguments, an unreadable scene), 1 on run-time failures.
 
+#[macro_use]
+mod console;
 mod bench;
 mod colorbar;
 mod outputs;
@@ -233,18 +235,24 @@ fn main() -> ExitCode {
         Command::Iso(args) => iso(args, &library),
         Command::Bench(args) => bench::bench(*args, &library),
         Command::Functors => {
-            print!("{}", functor_listing(&library));
+            out!("{}", functor_listing(&library));
             Ok(())
         }
     };
+    // A closed stdout only silenced the messages; any other failure to write
+    // them fails the command once its work is done.
+    let result = result.and_then(|()| match console::stdout_failure() {
+        Some(failure) => Err(Failure::Run(format!("cannot write to stdout: {failure}"))),
+        None => Ok(()),
+    });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(Failure::Input(message)) => {
-            eprintln!("{message}");
+            errln!("{message}");
             ExitCode::from(2)
         }
         Err(Failure::Run(message)) => {
-            eprintln!("error: {message}");
+            errln!("error: {message}");
             ExitCode::from(1)
         }
     }
@@ -270,8 +278,8 @@ fn compile(
 fn plan(args: PlanArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     let plan = compile(&args.pipeline, library, &args.compile.options())?;
     match args.format {
-        PlanFormat::Text => print!("{}", plan_to_text(&plan, library)),
-        PlanFormat::Json => println!(
+        PlanFormat::Text => out!("{}", plan_to_text(&plan, library)),
+        PlanFormat::Json => outln!(
             "{}",
             serde_json::to_string_pretty(&plan).map_err(|e| Failure::Run(e.to_string()))?
         ),
@@ -283,7 +291,7 @@ fn check(files: &[PathBuf], library: &FunctorLibrary) -> Result<(), Failure> {
     let mut failures = Vec::new();
     for file in files {
         match compile(file, library, &CompileOptions::default()) {
-            Ok(_) => println!("{}: ok", file.display()),
+            Ok(_) => outln!("{}: ok", file.display()),
             Err(Failure::Input(message) | Failure::Run(message)) => failures.push(message),
         }
     }
@@ -408,7 +416,7 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     }
     for (name, value) in &result.outputs {
         if let OutputValue::Host(value) = value {
-            println!("{name} = {value}");
+            outln!("{name} = {value}");
         }
     }
     for (name, path) in &requests {
@@ -427,10 +435,10 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         let path = std::path::Path::new(path);
         outputs::write_output(name, value, path, &setup.camera, library, &finish)
             .map_err(Failure::Run)?;
-        println!("wrote {name} to {}", path.display());
+        outln!("wrote {name} to {}", path.display());
     }
     if args.profile {
-        eprint!(
+        err!(
             "{}",
             profile_report(&result.profile, setup_time, run_time, &description)
         );
@@ -569,7 +577,7 @@ fn generate(args: GenArgs) -> Result<(), Failure> {
         .write_nifti(&args.output)
         .map_err(|e| Failure::Run(e.to_string()))?;
     let (low, high) = volume.value_range().unwrap_or((0.0, 0.0));
-    println!(
+    outln!(
         "wrote {} ({}x{}x{} samples, values {low} to {high}; try --iso {})",
         args.output.display(),
         args.grid[0],
@@ -614,7 +622,7 @@ fn iso(args: IsoArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         }
     };
     written.map_err(|e| Failure::Run(format!("cannot write {}: {e}", args.output.display())))?;
-    println!(
+    outln!(
         "wrote {} ({} triangles, {} vertices; isosurface in {:.1} ms)",
         args.output.display(),
         mesh.triangles.len(),

@@ -734,7 +734,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         scenes,
     };
     let markdown = report.markdown();
-    print!("{markdown}");
+    out!("{markdown}");
     if let Some(path) = &args.markdown {
         std::fs::write(path, &markdown)
             .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
