@@ -573,9 +573,13 @@ fn generate(args: GenArgs) -> Result<(), Failure> {
     let volume = dataset
         .generate(glam::UVec3::from(args.grid))
         .map_err(|e| Failure::Input(format!("error: {e}")))?;
-    volume
-        .write_nifti(&args.output)
-        .map_err(|e| Failure::Run(e.to_string()))?;
+    outputs::write_atomically(&args.output, |temporary| {
+        volume.write_nifti(temporary).map_err(|e| match e {
+            dpp_tracer::volume::VolumeError::Write { source, .. } => source.to_string(),
+            other => other.to_string(),
+        })
+    })
+    .map_err(Failure::Run)?;
     let (low, high) = volume.value_range().unwrap_or((0.0, 0.0));
     outln!(
         "wrote {} ({}x{}x{} samples, values {low} to {high}; try --iso {})",
@@ -611,9 +615,9 @@ fn iso(args: IsoArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
-    let written = match extension.as_str() {
-        "ply" => dpp_tracer::functors::isosurface::write_ply(&mesh, &args.output),
-        "obj" => dpp_tracer::functors::isosurface::write_obj(&mesh, &args.output),
+    let write = match extension.as_str() {
+        "ply" => dpp_tracer::functors::isosurface::write_ply,
+        "obj" => dpp_tracer::functors::isosurface::write_obj,
         _ => {
             return Err(Failure::Input(format!(
                 "error: cannot write `{}`: use a .ply or .obj file name",
@@ -621,7 +625,10 @@ fn iso(args: IsoArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             )))
         }
     };
-    written.map_err(|e| Failure::Run(format!("cannot write {}: {e}", args.output.display())))?;
+    outputs::write_atomically(&args.output, |temporary| {
+        write(&mesh, temporary).map_err(|e| e.to_string())
+    })
+    .map_err(Failure::Run)?;
     outln!(
         "wrote {} ({} triangles, {} vertices; isosurface in {:.1} ms)",
         args.output.display(),

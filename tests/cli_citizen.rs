@@ -7,7 +7,7 @@ mod common;
 
 use common::text;
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::{Command, Output, Stdio};
 
 const BIN: &str = env!("CARGO_BIN_EXE_dpp");
 
@@ -29,9 +29,22 @@ fn scene_dir() -> tempfile::TempDir {
     dir
 }
 
+fn all_text(output: &Output) -> String {
+    format!("{}{}", text(&output.stdout), text(&output.stderr))
+}
+
 fn read_npy<T: npyz::Deserialize>(path: &Path) -> Vec<T> {
     let bytes = std::fs::read(path).unwrap();
     npyz::NpyFile::new(&bytes[..]).unwrap().into_vec().unwrap()
+}
+
+/// The files in `dir` whose names start with `.dpp-` (temporary outputs).
+fn temporaries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|entry| entry.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|name| name.starts_with(".dpp-"))
+        .collect()
 }
 
 /// WORKLOAD1 on the quad, writing `image.png`, `depth.npy` and `prim.npy`:
@@ -127,4 +140,103 @@ fn a_full_stdout_fails_after_the_outputs() {
     for name in ["depth.npy", "prim.npy", "image.png"] {
         assert!(dir.path().join(name).exists(), "{name} was not written");
     }
+}
+
+#[test]
+fn an_output_that_cannot_be_written_is_a_clear_error() {
+    let dir = scene_dir();
+    std::fs::write(dir.path().join("a-file"), "").unwrap();
+    for (target, reason) in [
+        ("missing/depth.npy", "the folder `missing` does not exist"),
+        ("a-file/depth.npy", "cannot write a-file/depth.npy"),
+        ("missing/image.png", "the folder `missing` does not exist"),
+    ] {
+        let mut args = workload1_args();
+        args.truncate(args.len() - 6);
+        let name = Path::new(target).file_stem().unwrap().to_str().unwrap();
+        args.extend(["--out".into(), format!("{name}={target}")]);
+        let output = Command::new(BIN)
+            .args(&args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        let all = all_text(&output);
+        assert_eq!(output.status.code(), Some(1), "{target}: {all}");
+        assert!(all.contains(&format!("cannot write {target}")), "{all}");
+        assert!(all.contains(reason), "{target}: {all}");
+        assert!(!all.contains("panicked"), "{all}");
+        assert!(!dir.path().join("missing").exists());
+    }
+
+    // A folder without write permission (as root, permissions do not stop a
+    // write, so there is nothing to see).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let locked = dir.path().join("locked");
+        std::fs::create_dir(&locked).unwrap();
+        std::fs::set_permissions(&locked, std::fs::Permissions::from_mode(0o555)).unwrap();
+        if std::fs::write(locked.join("probe"), "").is_err() {
+            let mut args = workload1_args();
+            args.truncate(args.len() - 6);
+            args.extend(["--out".into(), "depth=locked/depth.npy".into()]);
+            let output = Command::new(BIN)
+                .args(&args)
+                .current_dir(dir.path())
+                .output()
+                .unwrap();
+            let all = all_text(&output);
+            assert_eq!(output.status.code(), Some(1), "{all}");
+            assert!(all.contains("cannot write locked/depth.npy"), "{all}");
+            assert_eq!(std::fs::read_dir(&locked).unwrap().count(), 0);
+        }
+        std::fs::set_permissions(&locked, std::fs::Permissions::from_mode(0o755)).unwrap();
+    }
+}
+
+/// A write cut short (a file size limit stands in for a full disk, and its
+/// signal for a kill in the middle of the write) never leaves a truncated file
+/// under the output's name: a file written before stays as it was.
+#[cfg(unix)]
+#[test]
+fn an_interrupted_write_leaves_no_partial_file() {
+    let dir = scene_dir();
+    let mut args = workload1_args();
+    args.truncate(args.len() - 6);
+    args.extend(["--out".into(), "depth=depth.npy".into()]);
+    // `ulimit -f 4`: writes past 2 KiB fail (the depth array is 3 KiB).
+    let limited = |trap: &str| {
+        Command::new("sh")
+            .arg("-c")
+            .arg(format!("{trap} ulimit -f 4; exec \"$0\" \"$@\""))
+            .arg(BIN)
+            .args(&args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap()
+    };
+
+    // The write fails (EFBIG, as ENOSPC would): a clear error naming the file,
+    // the old file untouched, no temporary file left.
+    std::fs::write(dir.path().join("depth.npy"), "the previous run's").unwrap();
+    let output = limited("trap '' XFSZ;");
+    let all = all_text(&output);
+    assert_eq!(output.status.code(), Some(1), "{all}");
+    assert!(all.contains("cannot write depth.npy"), "{all}");
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("depth.npy")).unwrap(),
+        "the previous run's"
+    );
+    assert!(
+        temporaries(dir.path()).is_empty(),
+        "{:?}",
+        temporaries(dir.path())
+    );
+
+    // The process is killed in the middle of the write (SIGXFSZ): nothing
+    // under the output's name.
+    std::fs::remove_file(dir.path().join("depth.npy")).unwrap();
+    let output = limited("");
+    assert!(!output.status.success(), "{}", all_text(&output));
+    assert!(!dir.path().join("depth.npy").exists());
 }

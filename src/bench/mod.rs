@@ -18,6 +18,7 @@
 mod chart;
 mod report;
 
+use crate::outputs::write_atomically;
 use crate::scene_setup::{self, SceneRequest, SceneSetup};
 use crate::{volume_setup, Backend, Failure};
 use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
@@ -735,19 +736,23 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     };
     let markdown = report.markdown();
     out!("{markdown}");
+    let write_text = |path: &Path, text: &str| {
+        write_atomically(path, |temporary| {
+            std::fs::write(temporary, text).map_err(|e| e.to_string())
+        })
+        .map_err(Failure::Run)
+    };
     if let Some(path) = &args.markdown {
-        std::fs::write(path, &markdown)
-            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+        write_text(path, &markdown)?;
     }
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&report.json())
             .map_err(|e| Failure::Run(e.to_string()))?;
-        std::fs::write(path, text + "\n")
-            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+        write_text(path, &(text + "\n"))?;
     }
     if let Some(path) = &args.chart {
-        chart::draw(&report, path)
-            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+        write_atomically(path, |temporary| chart::draw(&report, temporary))
+            .map_err(Failure::Run)?;
     }
     let disagreements: Vec<String> = report
         .scenes
