@@ -335,6 +335,44 @@ fn functor_listing(library: &FunctorLibrary) -> String {
     text
 }
 
+/// What a run reads: a traced scene (a mesh, a volume's isosurface or the
+/// built-in scene, with a camera), or, for a pipeline that reads `volume.*`
+/// (marching cubes), the volume itself.
+enum RunScene {
+    Traced(Box<scene_setup::SceneSetup>),
+    Volume(volume_setup::VolumeRun),
+}
+
+impl RunScene {
+    fn uniforms(&self) -> &dpp_runtime::Uniforms {
+        match self {
+            RunScene::Traced(setup) => &setup.uniforms,
+            RunScene::Volume(volume) => &volume.uniforms,
+        }
+    }
+
+    fn resources(&self) -> &(dyn std::any::Any + Send + Sync) {
+        match self {
+            RunScene::Traced(setup) => &setup.resources,
+            RunScene::Volume(volume) => &volume.resources,
+        }
+    }
+
+    fn camera(&self) -> Option<&dpp_tracer::Camera> {
+        match self {
+            RunScene::Traced(setup) => Some(&setup.camera),
+            RunScene::Volume(_) => None,
+        }
+    }
+
+    fn description(&self) -> &str {
+        match self {
+            RunScene::Traced(setup) => &setup.description,
+            RunScene::Volume(volume) => &volume.description,
+        }
+    }
+}
+
 fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     let plan = compile(&args.pipeline, library, &args.compile.options())?;
     let pool = rayon::ThreadPoolBuilder::new()
@@ -347,37 +385,17 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             ))
         })?;
 
-    let shading = shading_overrides(&args).map_err(Failure::Input)?;
     let setup_start = Instant::now();
-    let setup = scene_setup::SceneSetup::new(
-        &scene_setup::SceneRequest {
-            scene: args.scene.clone(),
-            size: args.size,
-            view: args.view.clone(),
-            eye: args.eye,
-            look_at: args.look_at,
-            up: args.up,
-            fov: args.fov,
-            scene_file: args.scene_file.clone(),
-            shading,
-            iso: args.iso,
-            raw: args.raw.clone(),
-            color_by: args.color_by.clone(),
-            iso_pipeline: args.iso_pipeline.clone(),
-            fuse: !args.compile.no_fuse,
-        },
-        library,
-    )
-    .map_err(Failure::Input)?;
+    let scene = run_scene(&args, &plan, library)?;
     let setup_time = setup_start.elapsed();
 
-    let mut description = setup.description.clone();
+    let mut description = scene.description().to_string();
     let (result, run_time) = match args.backend {
         Backend::Cpu => {
             let context = RunContext {
                 library,
-                uniforms: &setup.uniforms,
-                resources: &setup.resources,
+                uniforms: scene.uniforms(),
+                resources: scene.resources(),
                 chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
                 column_pool: &ColumnPool::new(),
             };
@@ -393,8 +411,8 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             let context = GpuRunContext {
                 gpu: &gpu,
                 library,
-                uniforms: &setup.uniforms,
-                resources: &setup.resources,
+                uniforms: scene.uniforms(),
+                resources: scene.resources(),
                 profile: args.profile,
             };
             let run_start = Instant::now();
@@ -427,13 +445,14 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 names.join(", ")
             )));
         };
-        let finish = if name == "image" {
-            image_finish(&args, &result.outputs, &setup)?
-        } else {
-            outputs::Finish::default()
+        let finish = match &scene {
+            RunScene::Traced(setup) if name == "image" => {
+                image_finish(&args, &result.outputs, setup)?
+            }
+            _ => outputs::Finish::default(),
         };
         let path = std::path::Path::new(path);
-        outputs::write_output(name, value, path, &setup.camera, library, &finish)
+        outputs::write_output(name, value, path, scene.camera(), library, &finish)
             .map_err(Failure::Run)?;
         outln!("wrote {name} to {}", path.display());
     }
@@ -444,6 +463,96 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         );
     }
     Ok(())
+}
+
+/// The scene `plan` runs on, once it is sure to provide every uniform the
+/// plan reads: a pipeline that reads `volume.*` runs on a volume given as
+/// the scene, any other on a traced scene. A uniform the scene cannot provide
+/// is a usage error (status 2) that says what to give, found before any work.
+fn run_scene(args: &RunArgs, plan: &Plan, library: &FunctorLibrary) -> Result<RunScene, Failure> {
+    let pipeline = args.pipeline.display();
+    let reads = plan.uniforms_read();
+    let named = |record: &str| -> Vec<String> {
+        reads
+            .iter()
+            .filter(|(r, _)| r == record)
+            .map(|(r, f)| format!("`{r}.{f}`"))
+            .collect()
+    };
+    let volume_reads = named("volume");
+    let scene = if volume_reads.is_empty() {
+        let shading = shading_overrides(args).map_err(Failure::Input)?;
+        let setup = scene_setup::SceneSetup::new(
+            &scene_setup::SceneRequest {
+                scene: args.scene.clone(),
+                size: args.size,
+                view: args.view.clone(),
+                eye: args.eye,
+                look_at: args.look_at,
+                up: args.up,
+                fov: args.fov,
+                scene_file: args.scene_file.clone(),
+                shading,
+                iso: args.iso,
+                raw: args.raw.clone(),
+                color_by: args.color_by.clone(),
+                iso_pipeline: args.iso_pipeline.clone(),
+                fuse: !args.compile.no_fuse,
+            },
+            library,
+        )
+        .map_err(Failure::Input)?;
+        RunScene::Traced(Box::new(setup))
+    } else {
+        let traced: Vec<String> = named("camera").into_iter().chain(named("scene")).collect();
+        if !traced.is_empty() {
+            return Err(Failure::Input(format!(
+                "error: {pipeline} reads {} and {}: dpp run gives a pipeline either a volume (`volume.*`) or a traced scene (`camera.*`, `scene.*`), not both",
+                volume_reads.join(", "),
+                traced.join(", ")
+            )));
+        }
+        let volume = match &args.scene {
+            Some(path) if volume_setup::is_volume_path(path) || args.raw.is_some() => path,
+            given => {
+                let given = match given {
+                    Some(path) => format!("; `{}` is a mesh", path.display()),
+                    None => String::new(),
+                };
+                return Err(Failure::Input(format!(
+                    "error: {pipeline} reads {}: pass a volume to run it on (a .nii or .nii.gz file, or a raw brick with --raw XxYxZ:TYPE){given}",
+                    volume_reads.join(", ")
+                )));
+            }
+        };
+        let traced_only = [
+            ("--iso", args.iso.is_some()),
+            ("--color-by", args.color_by.is_some()),
+            ("--iso-pipeline", args.iso_pipeline.is_some()),
+        ];
+        if let Some((option, _)) = traced_only.iter().find(|(_, given)| *given) {
+            return Err(Failure::Input(format!(
+                "error: {option} is for pipelines that trace a volume's isosurface; {pipeline} reads the volume itself ({}): set its params with --set NAME=VALUE",
+                volume_reads.join(", ")
+            )));
+        }
+        RunScene::Volume(
+            volume_setup::volume_run(volume, args.raw.as_deref()).map_err(Failure::Input)?,
+        )
+    };
+    let missing: Vec<String> = reads
+        .iter()
+        .filter(|(record, field)| scene.uniforms().get(record, field).is_none())
+        .map(|(record, field)| format!("`{record}.{field}`"))
+        .collect();
+    if !missing.is_empty() {
+        return Err(Failure::Input(format!(
+            "error: {pipeline} reads {}, which {} does not provide",
+            missing.join(", "),
+            scene.description()
+        )));
+    }
+    Ok(scene)
 }
 
 /// The transparent background and colour bar requested for the `image` output.

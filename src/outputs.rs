@@ -70,7 +70,7 @@ pub fn write_output(
     name: &str,
     value: &OutputValue,
     path: &Path,
-    camera: &Camera,
+    camera: Option<&Camera>,
     library: &FunctorLibrary,
     finish: &Finish<'_>,
 ) -> Result<(), String> {
@@ -98,10 +98,15 @@ fn write_png(
     name: &str,
     column: &Column,
     path: &Path,
-    camera: &Camera,
+    camera: Option<&Camera>,
     library: &FunctorLibrary,
     finish: &Finish<'_>,
 ) -> Result<(), String> {
+    let Some(camera) = camera else {
+        return Err(format!(
+            "output `{name}`: a PNG takes its size from the camera, and a run on a volume has none; write it as .npy"
+        ));
+    };
     let (width, height) = (camera.width, camera.height);
     let pixels = width as usize * height as usize;
     if column.len() != pixels {

@@ -240,3 +240,51 @@ fn an_interrupted_write_leaves_no_partial_file() {
     assert!(!output.status.success(), "{}", all_text(&output));
     assert!(!dir.path().join("depth.npy").exists());
 }
+
+/// A pipeline that reads `volume.*` run without a volume is a usage error
+/// that says what to give, found before any work; with one it runs on it.
+#[test]
+fn a_volume_pipeline_without_a_volume_says_what_to_give() {
+    let dir = scene_dir();
+    let iso = pipeline("isosurface.dpp");
+    for args in [vec!["run", &iso], vec!["run", &iso, "quad.obj"]] {
+        let output = Command::new(BIN)
+            .args(&args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        let all = all_text(&output);
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {all}");
+        assert!(all.contains("reads `volume.cells`"), "{all}");
+        assert!(all.contains("pass a volume"), "{all}");
+        assert!(all.contains(".nii.gz") && all.contains("--raw"), "{all}");
+    }
+
+    let gen = Command::new(BIN)
+        .args(["gen", "sphere", "--grid", "12,12,12", "-o", "ball.nii.gz"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(gen.status.success(), "{}", all_text(&gen));
+    // The level is the pipeline's own param; --iso belongs to traced volumes.
+    let output = Command::new(BIN)
+        .args(["run", &iso, "ball.nii.gz", "--iso", "0"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(2), "{}", all_text(&output));
+    assert!(all_text(&output).contains("--set NAME=VALUE"));
+    let output = Command::new(BIN)
+        .args(["run", &iso, "ball.nii.gz", "--set", "level=0.5"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(0), "{}", all_text(&output));
+    let count = text(&output.stdout);
+    let count: u64 = count
+        .trim()
+        .strip_prefix("count = ")
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{count}"));
+    assert!(count > 100, "{count} triangles");
+}
