@@ -288,3 +288,97 @@ fn a_volume_pipeline_without_a_volume_says_what_to_give() {
         .unwrap_or_else(|| panic!("{count}"));
     assert!(count > 100, "{count} triangles");
 }
+
+/// Runs `dpp args` in `dir` and waits at most `seconds` for it (then kills it
+/// and fails): an absurd resource must get a quick answer, not a long wait.
+fn dpp_within(seconds: u64, args: &[&str], dir: &Path) -> (Option<i32>, String) {
+    let log = dir.join(".log");
+    // One open file for both streams, so that they share its offset.
+    let file = std::fs::File::create(&log).unwrap();
+    let mut child = Command::new(BIN)
+        .args(args)
+        .current_dir(dir)
+        .stdout(file.try_clone().unwrap())
+        .stderr(file)
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(seconds);
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if std::time::Instant::now() > deadline {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!(
+                "dpp {args:?} ran for more than {seconds} s:\n{}",
+                std::fs::read_to_string(&log).unwrap()
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    let all = std::fs::read_to_string(&log).unwrap();
+    assert!(!all.contains("panicked"), "dpp {args:?}: {all}");
+    (status.code(), all)
+}
+
+/// Absurd resources get a clear answer at once (the bound leaves room for a
+/// busy machine; the answers take milliseconds).
+#[test]
+fn absurd_resources_are_answered_at_once() {
+    let dir = scene_dir();
+    let (w1, w3) = (pipeline("workload1.dpp"), pipeline("workload3.dpp"));
+    // Far more threads than cores: capped with a warning, and the run is quick.
+    let (status, all) = dpp_within(
+        20,
+        &[
+            "run",
+            &w1,
+            "quad.obj",
+            "--size",
+            "64x64",
+            "--threads",
+            "10000",
+        ],
+        dir.path(),
+    );
+    assert_eq!(status, Some(0), "{all}");
+    assert!(
+        all.contains("warning: --threads 10000 is more than"),
+        "{all}"
+    );
+
+    // An image larger than a camera may be: refused with the arguments.
+    let (status, all) = dpp_within(20, &["run", &w1, "--size", "100000x100000"], dir.path());
+    assert_eq!(status, Some(2), "{all}");
+    assert!(all.contains("more than the 268435456"), "{all}");
+
+    // A loop bound from a param: refused before the loop's first iteration.
+    let (status, all) = dpp_within(
+        20,
+        &[
+            "run",
+            &w3,
+            "quad.obj",
+            "--size",
+            "16x16",
+            "--set",
+            "maxDepth=1000000000",
+            "--set",
+            "compactOn=false",
+        ],
+        dir.path(),
+    );
+    assert_eq!(status, Some(1), "{all}");
+    assert!(all.contains("`for rayDepth in 0..1000000000`"), "{all}");
+
+    // Bench rounds beyond reason (and beyond u32 once summed).
+    for option in ["--rounds", "--warmup"] {
+        let (status, all) = dpp_within(20, &["bench", option, "4000000000"], dir.path());
+        assert_eq!(status, Some(2), "{all}");
+        assert!(
+            all.contains(&format!("{option} 4000000000: at most")),
+            "{all}"
+        );
+    }
+}

@@ -17,8 +17,11 @@ use std::time::{Duration, Instant};
 
 /// Longest array a stage may make: keeps `u32` indices valid and memory sane.
 pub const MAX_ELEMENTS: usize = 1 << 31;
-/// A `while` loop that runs this often is taken to be stuck.
-pub const MAX_WHILE_ITERATIONS: u64 = 10_000_000;
+/// A `while` loop that runs this often is taken to be stuck, and a `for` loop
+/// with more iterations than this is refused before its first (a param set to
+/// something absurd, `--set maxDepth=1000000000`, answers at once instead of
+/// running for days).
+pub const MAX_LOOP_ITERATIONS: u64 = 10_000_000;
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum OutputValue {
@@ -478,6 +481,13 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                     let (Some(start), Some(end)) = (start.as_int(), end.as_int()) else {
                         return Err(RunError::bad_input("loop bounds must be integers"));
                     };
+                    let iterations = i128::from(end) - i128::from(start);
+                    if iterations > i128::from(MAX_LOOP_ITERATIONS) {
+                        return Err(RunError::resource_limit(format!(
+                            "`for {} in {start}..{end}` would run {iterations} times, more than the {MAX_LOOP_ITERATIONS} a loop may run",
+                            self.plan.var(*var).name
+                        )));
+                    }
                     for i in start..end {
                         self.slots.set_host(*var, HostValue::Int(i));
                         if let Flow::Break = self.nodes(body)? {
@@ -489,9 +499,9 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                     let mut iterations = 0u64;
                     while self.eval(cond)?.as_bool() == Some(true) {
                         iterations += 1;
-                        if iterations > MAX_WHILE_ITERATIONS {
+                        if iterations > MAX_LOOP_ITERATIONS {
                             return Err(RunError::resource_limit(format!(
-                                "a `while` loop ran {MAX_WHILE_ITERATIONS} times; stopping (is its condition ever false?)"
+                                "a `while` loop ran {MAX_LOOP_ITERATIONS} times; stopping (is its condition ever false?)"
                             )));
                         }
                         if let Flow::Break = self.nodes(body)? {

@@ -72,6 +72,10 @@ const BORDER_BAND: f64 = 1e-4;
 /// four-hundredth of a pixel of a standard 1080p view (45° field of view).
 const BORDER_ROUNDING_STEPS: f64 = 16.0;
 
+/// Most measured (or warm-up) rounds: a mean over more says nothing new, and
+/// a mistyped count would run for days.
+const MAX_ROUNDS: u32 = 1000;
+
 /// At most this many rays on which the engines disagree are kept for the JSON report.
 const MISMATCH_SAMPLES: usize = 8;
 
@@ -303,6 +307,13 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
     }
     if args.rounds == 0 {
         return Err("error: --rounds must be at least 1".into());
+    }
+    for (option, rounds) in [("--rounds", args.rounds), ("--warmup", args.warmup)] {
+        if rounds > MAX_ROUNDS {
+            return Err(format!(
+                "error: {option} {rounds}: at most {MAX_ROUNDS} rounds (each view, workload and plan runs them all)"
+            ));
+        }
     }
     let specs: Vec<String> = if args.scenes.is_empty() {
         vec!["builtin".into()]
@@ -551,10 +562,7 @@ pub struct SceneResult {
 
 pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     let setup = check(&args).map_err(Failure::Input)?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0))
-        .build()
-        .map_err(|e| Failure::Input(format!("error: cannot start threads: {e}")))?;
+    let pool = crate::thread_pool(args.threads)?;
     let threads = pool.current_num_threads();
     // Opened once, before anything is measured: device creation is never part of a frame.
     let gpu = match args.backend {
