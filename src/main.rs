@@ -8,15 +8,16 @@ mod console;
 mod bench;
 mod colorbar;
 mod outputs;
+mod progress;
 mod scene_setup;
 mod volume_setup;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
+use dpp_gpu::{run_plan_gpu_observed, GpuContext, GpuRunContext};
 use dpp_runtime::compile::plan_text::plan_to_text;
 use dpp_runtime::cpu::column_pool::ColumnPool;
-use dpp_runtime::cpu::exec::{run_plan, RunContext};
-use dpp_runtime::interpret::{listed_op_shares, OutputValue, RunError, StageTiming};
+use dpp_runtime::cpu::exec::{run_plan_observed, RunContext};
+use dpp_runtime::interpret::{listed_op_shares, OutputValue, RunError, StageStart, StageTiming};
 use dpp_runtime::{compile_file, CompileOptions, FunctorLibrary, Plan};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -172,6 +173,9 @@ struct RunArgs {
     /// Print the time spent in each stage.
     #[arg(long, short = 'v', visible_alias = "verbose")]
     profile: bool,
+    /// No progress lines (they are shown only when stderr is a terminal).
+    #[arg(long, short = 'q')]
+    quiet: bool,
     #[command(flatten)]
     compile: CompileArgs,
 }
@@ -403,9 +407,11 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     let plan = compile(&args.pipeline, library, &args.compile.options())?;
     let pool = thread_pool(args.threads)?;
 
+    let progress = progress::Progress::on_terminal(args.quiet);
     let setup_start = Instant::now();
-    let scene = run_scene(&args, &plan, library)?;
+    let scene = run_scene(&args, &plan, library, &progress)?;
     let setup_time = setup_start.elapsed();
+    let observe = |stage: &StageStart<'_>| progress.stage(stage);
 
     let mut description = scene.description().to_string();
     let (result, run_time) = match args.backend {
@@ -417,13 +423,15 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
                 column_pool: &ColumnPool::new(),
             };
+            progress.phase(format!("running {}", plan.pipeline));
             let run_start = Instant::now();
             let result = pool
-                .install(|| run_plan(&plan, &context))
+                .install(|| run_plan_observed(&plan, &context, Some(&observe)))
                 .map_err(Failure::from)?;
             (result, run_start.elapsed())
         }
         Backend::Gpu => {
+            progress.phase("opening the GPU");
             let gpu = GpuContext::new().map_err(Failure::from)?;
             description.push_str(&format!("\nGPU: {}", gpu.adapter_name()));
             let context = GpuRunContext {
@@ -433,9 +441,10 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 resources: scene.resources(),
                 profile: args.profile,
             };
+            progress.phase(format!("running {} on the GPU", plan.pipeline));
             let run_start = Instant::now();
             let result = pool
-                .install(|| run_plan_gpu(&plan, &context))
+                .install(|| run_plan_gpu_observed(&plan, &context, Some(&observe)))
                 .map_err(Failure::from)?;
             (result, run_start.elapsed())
         }
@@ -452,7 +461,7 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     }
     for (name, value) in &result.outputs {
         if let OutputValue::Host(value) = value {
-            outln!("{name} = {value}");
+            progress.suspend(|| outln!("{name} = {value}"));
         }
     }
     for (name, path) in &requests {
@@ -470,10 +479,12 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             _ => outputs::Finish::default(),
         };
         let path = std::path::Path::new(path);
+        progress.phase(format!("writing {}", path.display()));
         outputs::write_output(name, value, path, scene.camera(), library, &finish)
             .map_err(Failure::Run)?;
-        outln!("wrote {name} to {}", path.display());
+        progress.suspend(|| outln!("wrote {name} to {}", path.display()));
     }
+    progress.finish();
     if args.profile {
         err!(
             "{}",
@@ -487,7 +498,12 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
 /// plan reads: a pipeline that reads `volume.*` runs on a volume given as
 /// the scene, any other on a traced scene. A uniform the scene cannot provide
 /// is a usage error (status 2) that says what to give, found before any work.
-fn run_scene(args: &RunArgs, plan: &Plan, library: &FunctorLibrary) -> Result<RunScene, Failure> {
+fn run_scene(
+    args: &RunArgs,
+    plan: &Plan,
+    library: &FunctorLibrary,
+    progress: &progress::Progress,
+) -> Result<RunScene, Failure> {
     let pipeline = args.pipeline.display();
     let reads = plan.uniforms_read();
     let named = |record: &str| -> Vec<String> {
@@ -518,6 +534,7 @@ fn run_scene(args: &RunArgs, plan: &Plan, library: &FunctorLibrary) -> Result<Ru
                 fuse: !args.compile.no_fuse,
             },
             library,
+            progress,
         )
         .map_err(Failure::Input)?;
         RunScene::Traced(Box::new(setup))
@@ -554,6 +571,7 @@ fn run_scene(args: &RunArgs, plan: &Plan, library: &FunctorLibrary) -> Result<Ru
                 volume_reads.join(", ")
             )));
         }
+        progress.phase(format!("loading {}", volume.display()));
         RunScene::Volume(
             volume_setup::volume_run(volume, args.raw.as_deref()).map_err(Failure::Input)?,
         )

@@ -382,3 +382,106 @@ fn absurd_resources_are_answered_at_once() {
         );
     }
 }
+
+/// Runs `dpp args` in `dir` with stderr on a pseudo-terminal (100 columns)
+/// and stdout on a pipe: its exit status, stdout, and what the terminal got.
+#[cfg(target_os = "linux")]
+fn dpp_on_a_terminal(args: &[&str], dir: &Path) -> (Option<i32>, String, String) {
+    use std::io::Read;
+    use std::os::fd::{FromRawFd, OwnedFd};
+    use std::os::unix::fs::OpenOptionsExt;
+    // SAFETY: plain libc calls on a descriptor this function owns; every
+    // result is checked, and the descriptor is handed to an OwnedFd at once.
+    let (master, slave_path) = unsafe {
+        let master = libc::posix_openpt(libc::O_RDWR | libc::O_NOCTTY);
+        assert!(master >= 0, "posix_openpt");
+        let master = OwnedFd::from_raw_fd(master);
+        let fd = std::os::fd::AsRawFd::as_raw_fd(&master);
+        assert_eq!(libc::grantpt(fd), 0, "grantpt");
+        assert_eq!(libc::unlockpt(fd), 0, "unlockpt");
+        let size = libc::winsize {
+            ws_row: 30,
+            ws_col: 100,
+            ws_xpixel: 0,
+            ws_ypixel: 0,
+        };
+        assert_eq!(libc::ioctl(fd, libc::TIOCSWINSZ, &size), 0, "TIOCSWINSZ");
+        let mut name = [0 as libc::c_char; 128];
+        assert_eq!(libc::ptsname_r(fd, name.as_mut_ptr(), name.len()), 0);
+        let path = std::ffi::CStr::from_ptr(name.as_ptr())
+            .to_str()
+            .unwrap()
+            .to_owned();
+        (std::fs::File::from(master), path)
+    };
+    let child = {
+        let slave = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .custom_flags(libc::O_NOCTTY)
+            .open(&slave_path)
+            .unwrap();
+        // The command (and its copy of the terminal) is gone after the spawn,
+        // so the reader sees the end once the child has exited.
+        Command::new(BIN)
+            .args(args)
+            .current_dir(dir)
+            .env("TERM", "xterm")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(slave)
+            .spawn()
+            .unwrap()
+    };
+    let reader = std::thread::spawn(move || {
+        let mut master = master;
+        let mut seen = Vec::new();
+        let mut buffer = [0u8; 4096];
+        // Linux answers EIO once no process holds the terminal any more.
+        while let Ok(n @ 1..) = master.read(&mut buffer) {
+            seen.extend_from_slice(&buffer[..n]);
+        }
+        seen
+    });
+    let output = child.wait_with_output().unwrap();
+    let terminal = reader.join().unwrap();
+    (output.status.code(), text(&output.stdout), text(&terminal))
+}
+
+/// On a terminal `dpp run` shows a line per phase of its work; not on a pipe,
+/// and not with --quiet.
+#[cfg(target_os = "linux")]
+#[test]
+fn progress_lines_on_a_terminal_only() {
+    let dir = scene_dir();
+    let w1 = pipeline("workload1.dpp");
+    let args = ["run", &w1, "quad.obj", "--size", "32x24", "-o", "image.png"];
+    let phases = [
+        "loading quad.obj: ",
+        "vertex normals of 2 triangles: ",
+        "BVH over 2 triangles: ",
+        "running workload1: ",
+        "writing image.png: ",
+    ];
+
+    let (status, stdout, terminal) = dpp_on_a_terminal(&args, dir.path());
+    assert_eq!(status, Some(0), "{terminal}");
+    assert_eq!(stdout, "wrote image to image.png\n");
+    for phase in phases {
+        assert!(terminal.contains(phase), "no `{phase}` in {terminal:?}");
+    }
+
+    let quiet: Vec<&str> = args.iter().copied().chain(["--quiet"]).collect();
+    let (status, stdout, terminal) = dpp_on_a_terminal(&quiet, dir.path());
+    assert_eq!(status, Some(0), "{terminal}");
+    assert_eq!(stdout, "wrote image to image.png\n");
+    assert_eq!(terminal, "", "--quiet");
+
+    let output = Command::new(BIN)
+        .args(args)
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(0));
+    assert_eq!(text(&output.stderr), "", "stderr is not a terminal");
+}

@@ -266,6 +266,24 @@ pub trait Backend {
     }
 }
 
+/// A stage about to run, as a run reports it to an observer (`dpp run`'s
+/// progress line on a terminal).
+#[derive(Clone, Copy, Debug)]
+pub struct StageStart<'a> {
+    /// The stage's number in the plan, from 1.
+    pub stage: usize,
+    /// How many stages the plan has.
+    pub stages: usize,
+    /// `iota → map<cameraRay> → map<intersect>`.
+    pub label: &'a str,
+    /// Which run of the stage this is, from 1 (loops run stages again).
+    pub run: u32,
+}
+
+/// Told of every stage before it runs; it must not block (it runs on the
+/// thread that drives the run).
+pub type StageObserver<'a> = &'a (dyn Fn(&StageStart<'_>) + Sync);
+
 /// Runs `plan` on `backend`.
 pub fn interpret<B: Backend>(
     plan: &Plan,
@@ -284,6 +302,18 @@ pub fn interpret_with_inputs<B: Backend>(
     uniforms: &Uniforms,
     records: &RecordRegistry,
     inputs: Vec<(VarId, B::Array)>,
+) -> Result<RunResult, RunError> {
+    interpret_observed(plan, backend, uniforms, records, inputs, None)
+}
+
+/// [`interpret_with_inputs`], telling `observer` of every stage before it runs.
+pub fn interpret_observed<B: Backend>(
+    plan: &Plan,
+    backend: &mut B,
+    uniforms: &Uniforms,
+    records: &RecordRegistry,
+    inputs: Vec<(VarId, B::Array)>,
+    observer: Option<StageObserver<'_>>,
 ) -> Result<RunResult, RunError> {
     let stages = plan.stages();
     let mut interpreter = Interpreter {
@@ -309,6 +339,7 @@ pub fn interpret_with_inputs<B: Backend>(
             })
             .collect(),
         stages,
+        observer,
     };
     for (var, array) in inputs {
         interpreter.slots.set_array(var, array);
@@ -349,6 +380,7 @@ struct Interpreter<'a, B: Backend> {
     outputs: Vec<(String, OutputValue)>,
     profile: Vec<StageTiming>,
     stages: Vec<&'a Stage>,
+    observer: Option<StageObserver<'a>>,
 }
 
 struct Environment<'a, A: Clone, B: Backend<Array = A>> {
@@ -413,6 +445,14 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                         .iter()
                         .position(|s| std::ptr::eq(*s, stage))
                         .expect("every stage is in the plan");
+                    if let Some(observe) = self.observer {
+                        observe(&StageStart {
+                            stage: number + 1,
+                            stages: self.stages.len(),
+                            label: &self.profile[number].label,
+                            run: self.profile[number].runs + 1,
+                        });
+                    }
                     let start = Instant::now();
                     let (elements, measured) = self.stage(stage).map_err(|e| {
                         e.within(format_args!(
