@@ -229,6 +229,8 @@ impl From<dpp_gpu::GpuError> for Failure {
 }
 
 fn main() -> ExitCode {
+    // Before any thread starts: it may set an environment variable.
+    dpp_gpu::quiet_headless_vulkan();
     let cli = Cli::parse();
     let library = dpp_tracer::functor_library();
     let result = match cli.command {

@@ -485,3 +485,46 @@ fn progress_lines_on_a_terminal_only() {
     assert_eq!(output.status.code(), Some(0));
     assert_eq!(text(&output.stderr), "", "stderr is not a terminal");
 }
+
+/// A GPU run in a headless session (no `XDG_RUNTIME_DIR`, no display, as
+/// over ssh or in a container) prints nothing from the Vulkan stack: Mesa's
+/// device-selection layer used to report twice that it could not reach a
+/// Wayland display.
+#[test]
+fn a_headless_gpu_run_prints_no_driver_noise() {
+    if !common::gpu_available("the headless GPU run") {
+        return;
+    }
+    let dir = scene_dir();
+    let w1 = pipeline("workload1.dpp");
+    let mut command = Command::new(BIN);
+    command
+        .args([
+            "run",
+            &w1,
+            "quad.obj",
+            "--size",
+            "16x16",
+            "--backend",
+            "gpu",
+        ])
+        .args(["-o", "gpu.png"])
+        .current_dir(dir.path());
+    for name in [
+        "XDG_RUNTIME_DIR",
+        "WAYLAND_DISPLAY",
+        "WAYLAND_SOCKET",
+        "DISPLAY",
+        "NODEVICE_SELECT",
+        "MESA_VK_DEVICE_SELECT",
+        "DRI_PRIME",
+    ] {
+        command.env_remove(name);
+    }
+    let output = command.output().unwrap();
+    let stderr = text(&output.stderr);
+    assert_eq!(output.status.code(), Some(0), "{stderr}");
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+    assert_eq!(stderr, "", "nothing but the image on a quiet run");
+    assert!(dir.path().join("gpu.png").exists());
+}
