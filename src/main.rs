@@ -3,18 +3,21 @@
 //! Exit status (docs/language.md §5): 0 on success, 2 on input errors (a malformed
 //! pipeline, bad arguments, an unreadable scene), 1 on run-time failures.
 
+#[macro_use]
+mod console;
 mod bench;
 mod colorbar;
 mod outputs;
+mod progress;
 mod scene_setup;
 mod volume_setup;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
+use dpp_gpu::{run_plan_gpu_observed, GpuContext, GpuRunContext};
 use dpp_runtime::compile::plan_text::plan_to_text;
 use dpp_runtime::cpu::column_pool::ColumnPool;
-use dpp_runtime::cpu::exec::{run_plan, RunContext};
-use dpp_runtime::interpret::{listed_op_shares, OutputValue, RunError, StageTiming};
+use dpp_runtime::cpu::exec::{run_plan_observed, RunContext};
+use dpp_runtime::interpret::{listed_op_shares, OutputValue, RunError, StageStart, StageTiming};
 use dpp_runtime::{compile_file, CompileOptions, FunctorLibrary, Plan};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -170,6 +173,9 @@ struct RunArgs {
     /// Print the time spent in each stage.
     #[arg(long, short = 'v', visible_alias = "verbose")]
     profile: bool,
+    /// No progress lines (they are shown only when stderr is a terminal).
+    #[arg(long, short = 'q')]
+    quiet: bool,
     #[command(flatten)]
     compile: CompileArgs,
 }
@@ -223,6 +229,8 @@ impl From<dpp_gpu::GpuError> for Failure {
 }
 
 fn main() -> ExitCode {
+    // Before any thread starts: it may set an environment variable.
+    dpp_gpu::quiet_headless_vulkan();
     let cli = Cli::parse();
     let library = dpp_tracer::functor_library();
     let result = match cli.command {
@@ -233,21 +241,53 @@ fn main() -> ExitCode {
         Command::Iso(args) => iso(args, &library),
         Command::Bench(args) => bench::bench(*args, &library),
         Command::Functors => {
-            print!("{}", functor_listing(&library));
+            out!("{}", functor_listing(&library));
             Ok(())
         }
     };
+    // A closed stdout only silenced the messages; any other failure to write
+    // them fails the command once its work is done.
+    let result = result.and_then(|()| match console::stdout_failure() {
+        Some(failure) => Err(Failure::Run(format!("cannot write to stdout: {failure}"))),
+        None => Ok(()),
+    });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(Failure::Input(message)) => {
-            eprintln!("{message}");
+            errln!("{message}");
             ExitCode::from(2)
         }
         Err(Failure::Run(message)) => {
-            eprintln!("error: {message}");
+            errln!("error: {message}");
             ExitCode::from(1)
         }
     }
+}
+
+/// Most worker threads per core `--threads` may ask for: results never depend
+/// on the thread count, and far beyond the cores threads only cost (2000 of
+/// them took 7 s to draw a 64×64 image, 10000 did not finish in a minute).
+const MAX_THREADS_PER_CORE: usize = 4;
+
+/// The worker threads of a command: one per core, or `--threads`, capped at
+/// [`MAX_THREADS_PER_CORE`] per core with a warning.
+pub(crate) fn thread_pool(requested: Option<usize>) -> Result<rayon::ThreadPool, Failure> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let most = MAX_THREADS_PER_CORE * cores;
+    let threads = match requested {
+        Some(n) if n > most => {
+            errln!(
+                "warning: --threads {n} is more than {MAX_THREADS_PER_CORE} per core ({cores} cores here): using {most} (results do not depend on the thread count)"
+            );
+            most
+        }
+        Some(n) => n,
+        None => 0,
+    };
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| Failure::Run(format!("cannot start {threads} worker threads: {e}")))
 }
 
 fn compile(
@@ -270,8 +310,8 @@ fn compile(
 fn plan(args: PlanArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     let plan = compile(&args.pipeline, library, &args.compile.options())?;
     match args.format {
-        PlanFormat::Text => print!("{}", plan_to_text(&plan, library)),
-        PlanFormat::Json => println!(
+        PlanFormat::Text => out!("{}", plan_to_text(&plan, library)),
+        PlanFormat::Json => outln!(
             "{}",
             serde_json::to_string_pretty(&plan).map_err(|e| Failure::Run(e.to_string()))?
         ),
@@ -283,7 +323,7 @@ fn check(files: &[PathBuf], library: &FunctorLibrary) -> Result<(), Failure> {
     let mut failures = Vec::new();
     for file in files {
         match compile(file, library, &CompileOptions::default()) {
-            Ok(_) => println!("{}: ok", file.display()),
+            Ok(_) => outln!("{}: ok", file.display()),
             Err(Failure::Input(message) | Failure::Run(message)) => failures.push(message),
         }
     }
@@ -327,71 +367,86 @@ fn functor_listing(library: &FunctorLibrary) -> String {
     text
 }
 
+/// What a run reads: a traced scene (a mesh, a volume's isosurface or the
+/// built-in scene, with a camera), or, for a pipeline that reads `volume.*`
+/// (marching cubes), the volume itself.
+enum RunScene {
+    Traced(Box<scene_setup::SceneSetup>),
+    Volume(volume_setup::VolumeRun),
+}
+
+impl RunScene {
+    fn uniforms(&self) -> &dpp_runtime::Uniforms {
+        match self {
+            RunScene::Traced(setup) => &setup.uniforms,
+            RunScene::Volume(volume) => &volume.uniforms,
+        }
+    }
+
+    fn resources(&self) -> &(dyn std::any::Any + Send + Sync) {
+        match self {
+            RunScene::Traced(setup) => &setup.resources,
+            RunScene::Volume(volume) => &volume.resources,
+        }
+    }
+
+    fn camera(&self) -> Option<&dpp_tracer::Camera> {
+        match self {
+            RunScene::Traced(setup) => Some(&setup.camera),
+            RunScene::Volume(_) => None,
+        }
+    }
+
+    fn description(&self) -> &str {
+        match self {
+            RunScene::Traced(setup) => &setup.description,
+            RunScene::Volume(volume) => &volume.description,
+        }
+    }
+}
+
 fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     let plan = compile(&args.pipeline, library, &args.compile.options())?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0))
-        .build()
-        .map_err(|e| {
-            Failure::Input(format!(
-                "error: cannot start {} threads: {e}",
-                args.threads.unwrap_or(0)
-            ))
-        })?;
+    let pool = thread_pool(args.threads)?;
 
-    let shading = shading_overrides(&args).map_err(Failure::Input)?;
+    let progress = progress::Progress::on_terminal(args.quiet);
     let setup_start = Instant::now();
-    let setup = scene_setup::SceneSetup::new(
-        &scene_setup::SceneRequest {
-            scene: args.scene.clone(),
-            size: args.size,
-            view: args.view.clone(),
-            eye: args.eye,
-            look_at: args.look_at,
-            up: args.up,
-            fov: args.fov,
-            scene_file: args.scene_file.clone(),
-            shading,
-            iso: args.iso,
-            raw: args.raw.clone(),
-            color_by: args.color_by.clone(),
-            iso_pipeline: args.iso_pipeline.clone(),
-            fuse: !args.compile.no_fuse,
-        },
-        library,
-    )
-    .map_err(Failure::Input)?;
+    let scene = run_scene(&args, &plan, library, &progress)?;
     let setup_time = setup_start.elapsed();
+    let observe = |stage: &StageStart<'_>| progress.stage(stage);
 
-    let mut description = setup.description.clone();
+    let mut description = scene.description().to_string();
     let (result, run_time) = match args.backend {
         Backend::Cpu => {
             let context = RunContext {
                 library,
-                uniforms: &setup.uniforms,
-                resources: &setup.resources,
+                uniforms: scene.uniforms(),
+                resources: scene.resources(),
                 chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
                 column_pool: &ColumnPool::new(),
             };
+            progress.phase(format!("running {}", plan.pipeline));
             let run_start = Instant::now();
             let result = pool
-                .install(|| run_plan(&plan, &context))
+                .install(|| run_plan_observed(&plan, &context, Some(&observe)))
                 .map_err(Failure::from)?;
             (result, run_start.elapsed())
         }
         Backend::Gpu => {
+            progress.phase("opening the GPU");
             let gpu = GpuContext::new().map_err(Failure::from)?;
             description.push_str(&format!("\nGPU: {}", gpu.adapter_name()));
             let context = GpuRunContext {
                 gpu: &gpu,
                 library,
-                uniforms: &setup.uniforms,
-                resources: &setup.resources,
+                uniforms: scene.uniforms(),
+                resources: scene.resources(),
                 profile: args.profile,
             };
+            progress.phase(format!("running {} on the GPU", plan.pipeline));
             let run_start = Instant::now();
             let result = pool
-                .install(|| run_plan_gpu(&plan, &context))
+                .install(|| run_plan_gpu_observed(&plan, &context, Some(&observe)))
                 .map_err(Failure::from)?;
             (result, run_start.elapsed())
         }
@@ -408,7 +463,7 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     }
     for (name, value) in &result.outputs {
         if let OutputValue::Host(value) = value {
-            println!("{name} = {value}");
+            progress.suspend(|| outln!("{name} = {value}"));
         }
     }
     for (name, path) in &requests {
@@ -419,23 +474,123 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 names.join(", ")
             )));
         };
-        let finish = if name == "image" {
-            image_finish(&args, &result.outputs, &setup)?
-        } else {
-            outputs::Finish::default()
+        let finish = match &scene {
+            RunScene::Traced(setup) if name == "image" => {
+                image_finish(&args, &result.outputs, setup)?
+            }
+            _ => outputs::Finish::default(),
         };
         let path = std::path::Path::new(path);
-        outputs::write_output(name, value, path, &setup.camera, library, &finish)
+        progress.phase(format!("writing {}", path.display()));
+        outputs::write_output(name, value, path, scene.camera(), library, &finish)
             .map_err(Failure::Run)?;
-        println!("wrote {name} to {}", path.display());
+        progress.suspend(|| outln!("wrote {name} to {}", path.display()));
     }
+    progress.finish();
     if args.profile {
-        eprint!(
+        err!(
             "{}",
             profile_report(&result.profile, setup_time, run_time, &description)
         );
     }
     Ok(())
+}
+
+/// The scene `plan` runs on, once it is sure to provide every uniform the
+/// plan reads: a pipeline that reads `volume.*` runs on a volume given as
+/// the scene, any other on a traced scene. A uniform the scene cannot provide
+/// is a usage error (status 2) that says what to give, found before any work.
+fn run_scene(
+    args: &RunArgs,
+    plan: &Plan,
+    library: &FunctorLibrary,
+    progress: &progress::Progress,
+) -> Result<RunScene, Failure> {
+    let pipeline = args.pipeline.display();
+    let reads = plan.uniforms_read();
+    let named = |record: &str| -> Vec<String> {
+        reads
+            .iter()
+            .filter(|(r, _)| r == record)
+            .map(|(r, f)| format!("`{r}.{f}`"))
+            .collect()
+    };
+    let volume_reads = named("volume");
+    let scene = if volume_reads.is_empty() {
+        let shading = shading_overrides(args).map_err(Failure::Input)?;
+        let setup = scene_setup::SceneSetup::new(
+            &scene_setup::SceneRequest {
+                scene: args.scene.clone(),
+                size: args.size,
+                view: args.view.clone(),
+                eye: args.eye,
+                look_at: args.look_at,
+                up: args.up,
+                fov: args.fov,
+                scene_file: args.scene_file.clone(),
+                shading,
+                iso: args.iso,
+                raw: args.raw.clone(),
+                color_by: args.color_by.clone(),
+                iso_pipeline: args.iso_pipeline.clone(),
+                fuse: !args.compile.no_fuse,
+            },
+            library,
+            progress,
+        )
+        .map_err(Failure::Input)?;
+        RunScene::Traced(Box::new(setup))
+    } else {
+        let traced: Vec<String> = named("camera").into_iter().chain(named("scene")).collect();
+        if !traced.is_empty() {
+            return Err(Failure::Input(format!(
+                "error: {pipeline} reads {} and {}: dpp run gives a pipeline either a volume (`volume.*`) or a traced scene (`camera.*`, `scene.*`), not both",
+                volume_reads.join(", "),
+                traced.join(", ")
+            )));
+        }
+        let volume = match &args.scene {
+            Some(path) if volume_setup::is_volume_path(path) || args.raw.is_some() => path,
+            given => {
+                let given = match given {
+                    Some(path) => format!("; `{}` is a mesh", path.display()),
+                    None => String::new(),
+                };
+                return Err(Failure::Input(format!(
+                    "error: {pipeline} reads {}: pass a volume to run it on (a .nii or .nii.gz file, or a raw brick with --raw XxYxZ:TYPE){given}",
+                    volume_reads.join(", ")
+                )));
+            }
+        };
+        let traced_only = [
+            ("--iso", args.iso.is_some()),
+            ("--color-by", args.color_by.is_some()),
+            ("--iso-pipeline", args.iso_pipeline.is_some()),
+        ];
+        if let Some((option, _)) = traced_only.iter().find(|(_, given)| *given) {
+            return Err(Failure::Input(format!(
+                "error: {option} is for pipelines that trace a volume's isosurface; {pipeline} reads the volume itself ({}): set its params with --set NAME=VALUE",
+                volume_reads.join(", ")
+            )));
+        }
+        progress.phase(format!("loading {}", volume.display()));
+        RunScene::Volume(
+            volume_setup::volume_run(volume, args.raw.as_deref()).map_err(Failure::Input)?,
+        )
+    };
+    let missing: Vec<String> = reads
+        .iter()
+        .filter(|(record, field)| scene.uniforms().get(record, field).is_none())
+        .map(|(record, field)| format!("`{record}.{field}`"))
+        .collect();
+    if !missing.is_empty() {
+        return Err(Failure::Input(format!(
+            "error: {pipeline} reads {}, which {} does not provide",
+            missing.join(", "),
+            scene.description()
+        )));
+    }
+    Ok(scene)
 }
 
 /// The transparent background and colour bar requested for the `image` output.
@@ -565,11 +720,15 @@ fn generate(args: GenArgs) -> Result<(), Failure> {
     let volume = dataset
         .generate(glam::UVec3::from(args.grid))
         .map_err(|e| Failure::Input(format!("error: {e}")))?;
-    volume
-        .write_nifti(&args.output)
-        .map_err(|e| Failure::Run(e.to_string()))?;
+    outputs::write_atomically(&args.output, |temporary| {
+        volume.write_nifti(temporary).map_err(|e| match e {
+            dpp_tracer::volume::VolumeError::Write { source, .. } => source.to_string(),
+            other => other.to_string(),
+        })
+    })
+    .map_err(Failure::Run)?;
     let (low, high) = volume.value_range().unwrap_or((0.0, 0.0));
-    println!(
+    outln!(
         "wrote {} ({}x{}x{} samples, values {low} to {high}; try --iso {})",
         args.output.display(),
         args.grid[0],
@@ -581,10 +740,7 @@ fn generate(args: GenArgs) -> Result<(), Failure> {
 }
 
 fn iso(args: IsoArgs, library: &FunctorLibrary) -> Result<(), Failure> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0))
-        .build()
-        .map_err(|e| Failure::Input(format!("error: cannot start threads: {e}")))?;
+    let pool = thread_pool(args.threads)?;
     let volume =
         volume_setup::load_volume(&args.volume, args.raw.as_deref()).map_err(Failure::Input)?;
     let request = volume_setup::IsoRequest {
@@ -603,9 +759,9 @@ fn iso(args: IsoArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
-    let written = match extension.as_str() {
-        "ply" => dpp_tracer::mesh_write::write_ply(&mesh, &args.output),
-        "obj" => dpp_tracer::mesh_write::write_obj(&mesh, &args.output),
+    let write = match extension.as_str() {
+        "ply" => dpp_tracer::mesh_write::write_ply,
+        "obj" => dpp_tracer::mesh_write::write_obj,
         _ => {
             return Err(Failure::Input(format!(
                 "error: cannot write `{}`: use a .ply or .obj file name",
@@ -613,8 +769,11 @@ fn iso(args: IsoArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             )))
         }
     };
-    written.map_err(|e| Failure::Run(format!("cannot write {}: {e}", args.output.display())))?;
-    println!(
+    outputs::write_atomically(&args.output, |temporary| {
+        write(&mesh, temporary).map_err(|e| e.to_string())
+    })
+    .map_err(Failure::Run)?;
+    outln!(
         "wrote {} ({} triangles, {} vertices; isosurface in {:.1} ms)",
         args.output.display(),
         mesh.triangles.len(),
@@ -654,6 +813,15 @@ fn parse_size(text: &str) -> Result<(u32, u32), String> {
     );
     if w == 0 || h == 0 {
         return Err(format!("image size {w}x{h} is empty"));
+    }
+    // The camera's own limit, checked here so that the answer comes before
+    // the scene is loaded.
+    let most = dpp_tracer::camera::MAX_PIXELS;
+    if u64::from(w) * u64::from(h) > most {
+        return Err(format!(
+            "image size {w}x{h} has {} pixels, more than the {most} (16384x16384) a camera may have",
+            u64::from(w) * u64::from(h)
+        ));
     }
     Ok((w, h))
 }

@@ -2,9 +2,10 @@
 //! isosurface of a volume, or the built-in scene; BVH built once, outside any
 //! frame), the camera, the shading and the uniforms.
 
+use crate::progress::Progress;
 use crate::volume_setup::{self, IsoRequest};
 use dpp_runtime::{FunctorLibrary, Uniforms};
-use dpp_tracer::builtin_scene::DEFAULT_RESOLUTION;
+use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
 use dpp_tracer::shading::MeshMaterials;
 use dpp_tracer::{
     Camera, CameraSetup, SceneFile, ShadingOverrides, StandardView, TraceResources, TraceScene,
@@ -44,8 +45,13 @@ pub struct SceneSetup {
 
 impl SceneSetup {
     /// Errors are the user's input (a bad file, a bad camera): exit status 2.
-    pub fn new(request: &SceneRequest, library: &FunctorLibrary) -> Result<SceneSetup, String> {
-        let (scene, origin) = load_scene(request, library)?;
+    /// Each phase of the loading is shown on `progress`.
+    pub fn new(
+        request: &SceneRequest,
+        library: &FunctorLibrary,
+        progress: &Progress,
+    ) -> Result<SceneSetup, String> {
+        let (scene, origin) = load_scene(request, library, progress)?;
         SceneSetup::with_scene(Arc::new(scene), &origin, request)
     }
 
@@ -88,24 +94,53 @@ impl SceneSetup {
 pub fn load_scene(
     request: &SceneRequest,
     library: &FunctorLibrary,
+    progress: &Progress,
 ) -> Result<(TraceScene, String), String> {
     match &request.scene {
-        None => Ok((
-            TraceScene::builtin(DEFAULT_RESOLUTION)
-                .map_err(|e| format!("error: the built-in scene failed: {e}"))?,
-            "built-in mixing layer".to_string(),
-        )),
+        None => {
+            progress.phase("generating the built-in scene");
+            let failed =
+                |e: &dyn std::fmt::Display| format!("error: the built-in scene failed: {e}");
+            let mesh = builtin_scene(DEFAULT_RESOLUTION).map_err(|e| failed(&e))?;
+            let scene = trace_scene(mesh, MeshMaterials::default(), progress, failed)?;
+            Ok((scene, "built-in mixing layer".to_string()))
+        }
         Some(path) if volume_setup::is_volume_path(path) || request.raw.is_some() => Ok((
-            volume_scene(request, path, library)?,
+            volume_scene(request, path, library, progress)?,
             path.display().to_string(),
         )),
         Some(path) => {
+            progress.phase(format!("loading {}", path.display()));
             let (mesh, materials) = load_mesh(path)?;
-            let scene = TraceScene::with_materials(mesh, materials)
-                .map_err(|e| format!("error: cannot use scene `{}`: {e}", path.display()))?;
+            let scene = trace_scene(mesh, materials, progress, |e| {
+                format!("error: cannot use scene `{}`: {e}", path.display())
+            })?;
             Ok((scene, path.display().to_string()))
         }
     }
+}
+
+/// A loaded mesh made ready to trace, in the phases `progress` shows: vertex
+/// normals (for a mesh without them), then the BVH. `failed` words an error.
+fn trace_scene(
+    mut mesh: TriangleMesh,
+    materials: MeshMaterials,
+    progress: &Progress,
+    failed: impl Fn(&dyn std::fmt::Display) -> String,
+) -> Result<TraceScene, String> {
+    if mesh.normals.is_none() {
+        // Checked first (the BVH build checks it too): normals of a broken
+        // mesh are not worth computing. The same words as the build's.
+        mesh.validate()
+            .map_err(|e| failed(&dpp_tracer::scene::SceneError::Mesh(e)))?;
+        progress.phase(format!(
+            "vertex normals of {} triangles",
+            mesh.triangles.len()
+        ));
+        mesh.add_crease_normals(dpp_tracer::scene::CREASE_ANGLE_DEGREES.to_radians());
+    }
+    progress.phase(format!("BVH over {} triangles", mesh.triangles.len()));
+    TraceScene::with_materials(mesh, materials).map_err(|e| failed(&e))
 }
 
 /// A mesh file by its extension: `.obj` (with its MTL materials), `.ply`, or
@@ -137,7 +172,9 @@ pub fn volume_scene(
     request: &SceneRequest,
     path: &Path,
     library: &FunctorLibrary,
+    progress: &Progress,
 ) -> Result<TraceScene, String> {
+    progress.phase(format!("loading {}", path.display()));
     let volume = volume_setup::load_volume(path, request.raw.as_deref())?;
     let Some(level) = request.iso else {
         let range = volume.value_range().map_or(String::new(), |(lo, hi)| {
@@ -153,14 +190,18 @@ pub fn volume_scene(
         pipeline: request.iso_pipeline.clone(),
         fuse: request.fuse,
     };
+    progress.phase(format!("isosurface at level {level}"));
     let mut mesh = volume_setup::isosurface(volume, &iso, library)?;
     // The surface's own values all equal the level: colour by height, or by a second field.
     mesh.scalars = None;
     if let Some(field) = &request.color_by {
+        progress.phase(format!("colouring by {}", field.display()));
         let field = volume_setup::load_volume(field, None)?;
         volume_setup::color_by(&mut mesh, &field);
     }
-    TraceScene::new(mesh).map_err(|e| format!("error: the isosurface of `{}`: {e}", path.display()))
+    trace_scene(mesh, MeshMaterials::default(), progress, |e| {
+        format!("error: the isosurface of `{}`: {e}", path.display())
+    })
 }
 
 /// The scene file given, or `mesh.toml` beside `mesh.obj` (`mesh.ply`, `mesh.obj.gz`…) when there is one.

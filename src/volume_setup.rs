@@ -35,6 +35,34 @@ pub fn load_volume(path: &Path, raw: Option<&str>) -> Result<Volume, String> {
     Ok(volume)
 }
 
+/// A volume as a run reads it directly: what a pipeline that reads
+/// `volume.*` (marching cubes, `pipelines/isosurface.dpp`) runs on.
+pub struct VolumeRun {
+    pub uniforms: dpp_runtime::Uniforms,
+    pub resources: VolumeResources,
+    /// One line for `--profile` and messages: the file and its samples.
+    pub description: String,
+}
+
+/// Loads the volume at `path` (a raw brick with `raw`) for a run on the volume itself.
+pub fn volume_run(path: &Path, raw: Option<&str>) -> Result<VolumeRun, String> {
+    let volume = load_volume(path, raw)?;
+    let description = format!(
+        "the volume {} ({}x{}x{} samples)",
+        path.display(),
+        volume.dims.x,
+        volume.dims.y,
+        volume.dims.z
+    );
+    Ok(VolumeRun {
+        uniforms: volume_uniforms(&volume),
+        resources: VolumeResources {
+            volume: Arc::new(volume),
+        },
+        description,
+    })
+}
+
 /// How to extract an isosurface.
 pub struct IsoRequest {
     pub level: f32,

@@ -42,6 +42,42 @@ impl From<GpuError> for RunError {
     }
 }
 
+/// Keeps Mesa's Vulkan device-selection layer from probing a Wayland display
+/// that cannot exist, which prints "error: XDG_RUNTIME_DIR is invalid or not
+/// set in the environment." twice on every GPU run without `XDG_RUNTIME_DIR`
+/// (ssh sessions, containers, CI) although nothing failed.
+///
+/// The message comes from libwayland-client, which Mesa's implicit layer
+/// `VK_LAYER_MESA_device_select` calls from `vkEnumeratePhysicalDevices` to
+/// put the GPU driving the display first, because wgpu enables
+/// `VK_KHR_wayland_surface` on every instance (wgpu 30 has no option to leave
+/// the window-system extensions out of a compute-only instance). Where no
+/// Wayland connection is possible (no usable `XDG_RUNTIME_DIR`, no
+/// `WAYLAND_SOCKET`, no absolute `WAYLAND_DISPLAY`) and no X display either,
+/// the layer has no display to look for, so this sets its documented switch
+/// `NODEVICE_SELECT=1`: the adapters come in the Vulkan loader's order and
+/// wgpu chooses among them as always (`WGPU_ADAPTER_NAME` picks one). Nothing
+/// changes where the user has set `NODEVICE_SELECT`, `MESA_VK_DEVICE_SELECT`
+/// or `DRI_PRIME` (they steer that layer), or where a display can be reached.
+///
+/// It changes the process's environment, so call it first thing in `main`,
+/// before any thread exists (`std::env::set_var` is unsound while another
+/// thread reads the environment).
+pub fn quiet_headless_vulkan() {
+    let set = |name: &str| std::env::var_os(name).is_some();
+    if set("NODEVICE_SELECT") || set("MESA_VK_DEVICE_SELECT") || set("DRI_PRIME") {
+        return;
+    }
+    let runtime_dir = std::env::var_os("XDG_RUNTIME_DIR")
+        .is_some_and(|dir| !dir.is_empty() && std::path::Path::new(&dir).is_dir());
+    let wayland_display = std::env::var_os("WAYLAND_DISPLAY")
+        .is_some_and(|display| std::path::Path::new(&display).is_absolute());
+    if runtime_dir || wayland_display || set("WAYLAND_SOCKET") || set("DISPLAY") {
+        return;
+    }
+    std::env::set_var("NODEVICE_SELECT", "1");
+}
+
 /// Limits the backend plans with: the adapter's, unless a test lowers them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct GpuLimits {

@@ -13,7 +13,8 @@ use dpp_runtime::column::Column;
 use dpp_runtime::functor::FunctorLibrary;
 use dpp_runtime::host::{HostValue, Uniforms};
 use dpp_runtime::interpret::{
-    interpret_with_inputs, Backend, RunError, RunResult, Slots, StageCall, StageMeasurement,
+    interpret_observed, Backend, RunError, RunResult, Slots, StageCall, StageMeasurement,
+    StageObserver,
 };
 use dpp_runtime::monoid::MonoidOp;
 use dpp_runtime::types::ElemType;
@@ -41,7 +42,17 @@ pub fn run_plan_gpu(
     plan: &dpp_runtime::Plan,
     context: &GpuRunContext<'_>,
 ) -> Result<RunResult, RunError> {
-    run_plan_gpu_with_inputs(plan, context, Vec::new())
+    run_plan_gpu_with_inputs(plan, context, Vec::new(), None)
+}
+
+/// [`run_plan_gpu`], telling `observer` of every stage before it is issued
+/// (the device may still be working on earlier stages).
+pub fn run_plan_gpu_observed(
+    plan: &dpp_runtime::Plan,
+    context: &GpuRunContext<'_>,
+    observer: Option<StageObserver<'_>>,
+) -> Result<RunResult, RunError> {
+    run_plan_gpu_with_inputs(plan, context, Vec::new(), observer)
 }
 
 /// Runs `plan` with some array variables already on the device.
@@ -49,6 +60,7 @@ pub(crate) fn run_plan_gpu_with_inputs(
     plan: &dpp_runtime::Plan,
     context: &GpuRunContext<'_>,
     inputs: Vec<(dpp_runtime::compile::ir::VarId, GpuArray)>,
+    observer: Option<StageObserver<'_>>,
 ) -> Result<RunResult, RunError> {
     let gpu = context.gpu;
     let records = &context.library.records;
@@ -80,7 +92,14 @@ pub(crate) fn run_plan_gpu_with_inputs(
         failures: Mutex::new(Vec::new()),
         buffers: RunBuffers::new(gpu),
     };
-    let result = interpret_with_inputs(plan, &mut backend, context.uniforms, records, inputs)?;
+    let result = interpret_observed(
+        plan,
+        &mut backend,
+        context.uniforms,
+        records,
+        inputs,
+        observer,
+    )?;
     backend.check_status()?;
     Ok(result)
 }

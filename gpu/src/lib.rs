@@ -15,7 +15,7 @@ mod stage;
 mod twin_check;
 
 pub use array::GpuArray;
-pub use device::{gpu_for_tests, GpuContext, GpuError, GpuLimits};
-pub use exec::{run_plan_gpu, GpuRunContext};
+pub use device::{gpu_for_tests, quiet_headless_vulkan, GpuContext, GpuError, GpuLimits};
+pub use exec::{run_plan_gpu, run_plan_gpu_observed, GpuRunContext};
 pub use functor_call::run_functor_gpu;
 pub use twin_check::{check_twin, validate_wgsl};

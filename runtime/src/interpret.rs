@@ -17,8 +17,11 @@ use std::time::{Duration, Instant};
 
 /// Longest array a stage may make: keeps `u32` indices valid and memory sane.
 pub const MAX_ELEMENTS: usize = 1 << 31;
-/// A `while` loop that runs this often is taken to be stuck.
-pub const MAX_WHILE_ITERATIONS: u64 = 10_000_000;
+/// A `while` loop that runs this often is taken to be stuck, and a `for` loop
+/// with more iterations than this is refused before its first (a param set to
+/// something absurd, `--set maxDepth=1000000000`, answers at once instead of
+/// running for days).
+pub const MAX_LOOP_ITERATIONS: u64 = 10_000_000;
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum OutputValue {
@@ -263,6 +266,24 @@ pub trait Backend {
     }
 }
 
+/// A stage about to run, as a run reports it to an observer (`dpp run`'s
+/// progress line on a terminal).
+#[derive(Clone, Copy, Debug)]
+pub struct StageStart<'a> {
+    /// The stage's number in the plan, from 1.
+    pub stage: usize,
+    /// How many stages the plan has.
+    pub stages: usize,
+    /// `iota → map<cameraRay> → map<intersect>`.
+    pub label: &'a str,
+    /// Which run of the stage this is, from 1 (loops run stages again).
+    pub run: u32,
+}
+
+/// Told of every stage before it runs; it must not block (it runs on the
+/// thread that drives the run).
+pub type StageObserver<'a> = &'a (dyn Fn(&StageStart<'_>) + Sync);
+
 /// Runs `plan` on `backend`.
 pub fn interpret<B: Backend>(
     plan: &Plan,
@@ -281,6 +302,18 @@ pub fn interpret_with_inputs<B: Backend>(
     uniforms: &Uniforms,
     records: &RecordRegistry,
     inputs: Vec<(VarId, B::Array)>,
+) -> Result<RunResult, RunError> {
+    interpret_observed(plan, backend, uniforms, records, inputs, None)
+}
+
+/// [`interpret_with_inputs`], telling `observer` of every stage before it runs.
+pub fn interpret_observed<B: Backend>(
+    plan: &Plan,
+    backend: &mut B,
+    uniforms: &Uniforms,
+    records: &RecordRegistry,
+    inputs: Vec<(VarId, B::Array)>,
+    observer: Option<StageObserver<'_>>,
 ) -> Result<RunResult, RunError> {
     let stages = plan.stages();
     let mut interpreter = Interpreter {
@@ -306,6 +339,7 @@ pub fn interpret_with_inputs<B: Backend>(
             })
             .collect(),
         stages,
+        observer,
     };
     for (var, array) in inputs {
         interpreter.slots.set_array(var, array);
@@ -346,6 +380,7 @@ struct Interpreter<'a, B: Backend> {
     outputs: Vec<(String, OutputValue)>,
     profile: Vec<StageTiming>,
     stages: Vec<&'a Stage>,
+    observer: Option<StageObserver<'a>>,
 }
 
 struct Environment<'a, A: Clone, B: Backend<Array = A>> {
@@ -410,6 +445,14 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                         .iter()
                         .position(|s| std::ptr::eq(*s, stage))
                         .expect("every stage is in the plan");
+                    if let Some(observe) = self.observer {
+                        observe(&StageStart {
+                            stage: number + 1,
+                            stages: self.stages.len(),
+                            label: &self.profile[number].label,
+                            run: self.profile[number].runs + 1,
+                        });
+                    }
                     let start = Instant::now();
                     let (elements, measured) = self.stage(stage).map_err(|e| {
                         e.within(format_args!(
@@ -478,6 +521,13 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                     let (Some(start), Some(end)) = (start.as_int(), end.as_int()) else {
                         return Err(RunError::bad_input("loop bounds must be integers"));
                     };
+                    let iterations = i128::from(end) - i128::from(start);
+                    if iterations > i128::from(MAX_LOOP_ITERATIONS) {
+                        return Err(RunError::resource_limit(format!(
+                            "`for {} in {start}..{end}` would run {iterations} times, more than the {MAX_LOOP_ITERATIONS} a loop may run",
+                            self.plan.var(*var).name
+                        )));
+                    }
                     for i in start..end {
                         self.slots.set_host(*var, HostValue::Int(i));
                         if let Flow::Break = self.nodes(body)? {
@@ -489,9 +539,9 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                     let mut iterations = 0u64;
                     while self.eval(cond)?.as_bool() == Some(true) {
                         iterations += 1;
-                        if iterations > MAX_WHILE_ITERATIONS {
+                        if iterations > MAX_LOOP_ITERATIONS {
                             return Err(RunError::resource_limit(format!(
-                                "a `while` loop ran {MAX_WHILE_ITERATIONS} times; stopping (is its condition ever false?)"
+                                "a `while` loop ran {MAX_LOOP_ITERATIONS} times; stopping (is its condition ever false?)"
                             )));
                         }
                         if let Flow::Break = self.nodes(body)? {

@@ -18,6 +18,7 @@
 mod chart;
 mod report;
 
+use crate::outputs::write_atomically;
 use crate::scene_setup::{self, SceneRequest, SceneSetup};
 use crate::{volume_setup, Backend, Failure};
 use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
@@ -70,6 +71,10 @@ const BORDER_BAND: f64 = 1e-4;
 /// edge (measured on a soup of such slivers) went either way. 16 steps is a
 /// four-hundredth of a pixel of a standard 1080p view (45° field of view).
 const BORDER_ROUNDING_STEPS: f64 = 16.0;
+
+/// Most measured (or warm-up) rounds: a mean over more says nothing new, and
+/// a mistyped count would run for days.
+const MAX_ROUNDS: u32 = 1000;
 
 /// At most this many rays on which the engines disagree are kept for the JSON report.
 const MISMATCH_SAMPLES: usize = 8;
@@ -302,6 +307,13 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
     }
     if args.rounds == 0 {
         return Err("error: --rounds must be at least 1".into());
+    }
+    for (option, rounds) in [("--rounds", args.rounds), ("--warmup", args.warmup)] {
+        if rounds > MAX_ROUNDS {
+            return Err(format!(
+                "error: {option} {rounds}: at most {MAX_ROUNDS} rounds (each view, workload and plan runs them all)"
+            ));
+        }
     }
     let specs: Vec<String> = if args.scenes.is_empty() {
         vec!["builtin".into()]
@@ -550,10 +562,7 @@ pub struct SceneResult {
 
 pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     let setup = check(&args).map_err(Failure::Input)?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0))
-        .build()
-        .map_err(|e| Failure::Input(format!("error: cannot start threads: {e}")))?;
+    let pool = crate::thread_pool(args.threads)?;
     let threads = pool.current_num_threads();
     // Opened once, before anything is measured: device creation is never part of a frame.
     let gpu = match args.backend {
@@ -734,20 +743,24 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         scenes,
     };
     let markdown = report.markdown();
-    print!("{markdown}");
+    out!("{markdown}");
+    let write_text = |path: &Path, text: &str| {
+        write_atomically(path, |temporary| {
+            std::fs::write(temporary, text).map_err(|e| e.to_string())
+        })
+        .map_err(Failure::Run)
+    };
     if let Some(path) = &args.markdown {
-        std::fs::write(path, &markdown)
-            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+        write_text(path, &markdown)?;
     }
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&report.json())
             .map_err(|e| Failure::Run(e.to_string()))?;
-        std::fs::write(path, text + "\n")
-            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+        write_text(path, &(text + "\n"))?;
     }
     if let Some(path) = &args.chart {
-        chart::draw(&report, path)
-            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+        write_atomically(path, |temporary| chart::draw(&report, temporary))
+            .map_err(Failure::Run)?;
     }
     let disagreements: Vec<String> = report
         .scenes

@@ -501,6 +501,32 @@ impl Plan {
         walk(&self.body, &mut out);
         out
     }
+
+    /// Every uniform the plan reads, `(record, field)`, sorted and once each:
+    /// what a run's scene must provide (`dpp run` checks it before running).
+    pub fn uniforms_read(&self) -> Vec<(String, String)> {
+        let mut exprs: Vec<&HostExpr> = Vec::new();
+        walk_nodes(&self.body, &mut |node| match node {
+            Node::Op(op) => exprs.extend(op.host_exprs()),
+            Node::Stage(stage) => {
+                exprs.extend(&stage.index_space);
+                exprs.extend(stage.ops.iter().flat_map(Op::host_exprs));
+            }
+            Node::Host { expr, .. } => exprs.push(expr),
+            Node::For { start, end, .. } => exprs.extend([start, end]),
+            Node::While { cond, .. } | Node::If { cond, .. } => exprs.push(cond),
+            Node::View { .. } | Node::Alias { .. } | Node::Break | Node::Output { .. } => {}
+        });
+        let mut uniforms = Vec::new();
+        for expr in exprs {
+            expr.visit_uniforms(&mut |record, field| {
+                uniforms.push((record.to_string(), field.to_string()))
+            });
+        }
+        uniforms.sort();
+        uniforms.dedup();
+        uniforms
+    }
 }
 
 /// Visits every node of a body, depth first, in order.
@@ -523,6 +549,20 @@ pub fn walk_nodes<'a>(nodes: &'a [Node], visit: &mut impl FnMut(&'a Node)) {
 }
 
 impl HostExpr {
+    /// Every uniform the expression reads, as record and field.
+    pub fn visit_uniforms(&self, visit: &mut impl FnMut(&str, &str)) {
+        match self {
+            HostExpr::Uniform { record, field } => visit(record, field),
+            HostExpr::Const(_) | HostExpr::Var(_) | HostExpr::Len(_) => {}
+            HostExpr::Unary(_, e) => e.visit_uniforms(visit),
+            HostExpr::Binary(_, a, b) => {
+                a.visit_uniforms(visit);
+                b.visit_uniforms(visit);
+            }
+            HostExpr::Call(_, args) => args.iter().for_each(|a| a.visit_uniforms(visit)),
+        }
+    }
+
     /// Every host variable and array (through `len`) the expression reads.
     pub fn visit_vars(&self, visit: &mut impl FnMut(VarId)) {
         match self {

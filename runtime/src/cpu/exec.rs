@@ -13,8 +13,8 @@ use crate::elem::Element;
 use crate::functor::{CallContext, FunctorLibrary};
 use crate::host::Uniforms;
 use crate::interpret::{
-    elementwise_materialised, interpret, Backend, OpHostValues, RunError, RunResult, Slots,
-    StageCall, StageMeasurement,
+    elementwise_materialised, interpret_observed, Backend, OpHostValues, RunError, RunResult,
+    Slots, StageCall, StageMeasurement, StageObserver,
 };
 use crate::types::ElemType;
 use std::any::Any;
@@ -36,12 +36,23 @@ pub struct RunContext<'a> {
 
 /// Runs `plan` on the CPU.
 pub fn run_plan(plan: &Plan, context: &RunContext<'_>) -> Result<RunResult, RunError> {
+    run_plan_observed(plan, context, None)
+}
+
+/// [`run_plan`], telling `observer` of every stage before it runs.
+pub fn run_plan_observed(
+    plan: &Plan,
+    context: &RunContext<'_>,
+    observer: Option<StageObserver<'_>>,
+) -> Result<RunResult, RunError> {
     let mut backend = CpuBackend { context };
-    interpret(
+    interpret_observed(
         plan,
         &mut backend,
         context.uniforms,
         &context.library.records,
+        Vec::new(),
+        observer,
     )
 }
 
