@@ -6,9 +6,7 @@
 //! Without a GPU adapter these tests skip with a printed reason, unless
 //! `DPP_REQUIRE_GPU` is set (CI sets it and installs Mesa's lavapipe).
 
-mod common;
-
-use common::{mean_flip, scene_dir, Image, SCENE_VIEW};
+use crate::common::{mean_flip, scene_dir, Image, SCENE_VIEW};
 use std::path::Path;
 use std::process::Command;
 
@@ -26,7 +24,7 @@ fn run(dir: &Path, pipeline: &Path, args: &[String], backend: &str) -> String {
     all.extend(args.iter().cloned());
     all.extend(["--backend".to_string(), backend.to_string()]);
     let all: Vec<&str> = all.iter().map(String::as_str).collect();
-    let output = common::dpp(&all, dir);
+    let output = crate::common::dpp(&all, dir);
     assert!(
         output.status.success(),
         "dpp {all:?}: {}",
@@ -99,7 +97,7 @@ fn comparison(name: &str) -> Option<Comparison> {
             prim: false,
             exact: vec!["inclusive", "exclusive", "segmented"],
         },
-        // Needs a volume: compared in tracer/tests/isosurface.rs.
+        // Needs a volume: compared in tracer/tests/pipelines/isosurface.rs.
         "isosurface" => return None,
         other => panic!("pipeline `{other}` has no backend comparison: add one here"),
     })
@@ -154,11 +152,11 @@ fn compare(name: &str, pipeline: &Path, comparison: &Comparison) {
 
 #[test]
 fn every_pipeline_agrees_on_both_backends() {
-    if !common::gpu_available("the backend comparison") {
+    if !crate::common::gpu_available("the backend comparison") {
         return;
     }
-    for pipeline in common::pipeline_files() {
-        let name = common::pipeline_name(&pipeline);
+    for pipeline in crate::common::pipeline_files() {
+        let name = crate::common::pipeline_name(&pipeline);
         if let Some(comparison) = comparison(&name) {
             compare(&name, &pipeline, &comparison);
         }
@@ -167,10 +165,10 @@ fn every_pipeline_agrees_on_both_backends() {
 
 #[test]
 fn the_builtin_scene_agrees_on_both_backends() {
-    if !common::gpu_available("the backend comparison") {
+    if !crate::common::gpu_available("the backend comparison") {
         return;
     }
-    let pipeline = common::repo().join("pipelines/workload1.dpp");
+    let pipeline = crate::common::repo().join("pipelines/workload1.dpp");
     let comparison = Comparison {
         args: ["--size", "128x96", "--out", "prim=prim.npy"]
             .iter()
@@ -181,7 +179,7 @@ fn the_builtin_scene_agrees_on_both_backends() {
         exact: vec![],
     };
     compare("builtin workload1", &pipeline, &comparison);
-    let pipeline = common::repo().join("pipelines/workload3.dpp");
+    let pipeline = crate::common::repo().join("pipelines/workload3.dpp");
     let comparison = Comparison {
         args: ["--size", "128x96"].iter().map(|s| s.to_string()).collect(),
         image: true,
@@ -195,7 +193,7 @@ fn the_builtin_scene_agrees_on_both_backends() {
 fn a_missing_gpu_is_a_clear_error() {
     // No adapter of a backend this build lacks: the run must fail cleanly.
     let dir = tempfile::tempdir().unwrap();
-    let pipeline = common::repo().join("pipelines/examples/prefix_sum.dpp");
+    let pipeline = crate::common::repo().join("pipelines/examples/prefix_sum.dpp");
     let output = Command::new(env!("CARGO_BIN_EXE_dpp"))
         .args(["run", pipeline.to_str().unwrap(), "--backend", "gpu"])
         .env("WGPU_BACKEND", "metal")

@@ -8,9 +8,7 @@
 //! files `load` read, in module order, then either a summary of the compiled
 //! plan or every diagnostic, one per line.
 
-mod common;
-
-use common::{check, library, pipelines_path, trim_indent};
+use crate::common::{check, library, pipelines_path, trim_indent};
 use dpp_runtime::compile::load::load_program;
 use dpp_runtime::{compile_file, CompileOptions, Plan};
 use std::path::{Path, PathBuf};

@@ -2,14 +2,12 @@
 //! outputs, and WORKLOAD1's triangle ids against an independent brute-force
 //! tracer that implements the camera of docs/language.md §8 on its own.
 
-mod common;
-
-use common::{dpp, text};
+use crate::common::{dpp, text};
 
 use std::path::Path;
 
 fn pipeline(name: &str) -> String {
-    common::repo()
+    crate::common::repo()
         .join("pipelines")
         .join(name)
         .display()

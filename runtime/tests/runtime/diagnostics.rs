@@ -2,9 +2,7 @@
 //! diagnostics (file:line:col, the source line, the span marked), pinned by
 //! snapshots. `use_cycle_b.dpp` is only reached through `use_cycle_a.dpp`.
 
-mod common;
-
-use common::library;
+use crate::common::library;
 use dpp_runtime::{compile_file, CompileOptions};
 use std::path::{Path, PathBuf};
 

@@ -3,16 +3,14 @@
 //! killed while writing, absurd resources, a terminal (progress) or none, a
 //! GPU run without `XDG_RUNTIME_DIR`.
 
-mod common;
-
-use common::text;
+use crate::common::text;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
 const BIN: &str = env!("CARGO_BIN_EXE_dpp");
 
 fn pipeline(name: &str) -> String {
-    common::repo()
+    crate::common::repo()
         .join("pipelines")
         .join(name)
         .display()
@@ -492,7 +490,7 @@ fn progress_lines_on_a_terminal_only() {
 /// Wayland display.
 #[test]
 fn a_headless_gpu_run_prints_no_driver_noise() {
-    if !common::gpu_available("the headless GPU run") {
+    if !crate::common::gpu_available("the headless GPU run") {
         return;
     }
     let dir = scene_dir();

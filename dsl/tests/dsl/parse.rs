@@ -8,8 +8,8 @@ use std::fmt::Write as _;
 use dpp_dsl::ast::{Block, Call, Expr, ExprKind, Ident, Item, Module, Stmt, StmtKind, UnaryOp};
 use dpp_dsl::{parse_module, render, FileId, SourceMap, Span};
 
-const WORKLOAD3: &str = include_str!("data/workload3.dpp");
-const PRELUDE: &str = include_str!("data/prelude.dpp");
+const WORKLOAD3: &str = include_str!("../data/workload3.dpp");
+const PRELUDE: &str = include_str!("../data/prelude.dpp");
 
 /// Parses `source`, which must be valid, and snapshots it with its S-expression form.
 fn check(name: &str, source: &str) {

@@ -5,9 +5,7 @@
 //! `DPP_BLESS=1 cargo test --test images` rewrites the golden images; a missing
 //! golden image is a failure, never a silent pass.
 
-mod common;
-
-use common::{mean_flip, scene_dir, Image, SCENE_VIEW};
+use crate::common::{mean_flip, scene_dir, Image, SCENE_VIEW};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -20,7 +18,7 @@ const GOLDEN_TOLERANCE: f32 = 0.005;
 
 /// Runs `dpp run PIPELINE [args]` in `dir`, writing the image to `out.png`.
 fn run_dpp(dir: &Path, pipeline: &str, args: &[&str]) -> PathBuf {
-    let pipeline = common::repo().join("pipelines").join(pipeline);
+    let pipeline = crate::common::repo().join("pipelines").join(pipeline);
     let output = Command::new(env!("CARGO_BIN_EXE_dpp"))
         .arg("run")
         .arg(&pipeline)
@@ -49,7 +47,7 @@ fn small_scene(dir: &Path, pipeline: &str, size: &str, extra: &[&str]) -> Image 
 }
 
 fn check_golden(name: &str, image: &Image) {
-    let path: PathBuf = common::repo()
+    let path: PathBuf = crate::common::repo()
         .join("tests/golden")
         .join(format!("{name}.png"));
     if std::env::var_os("DPP_BLESS").is_some() {
@@ -392,7 +390,7 @@ fn the_scene_at_1e15_and_1e_minus_14_times_its_size_renders_the_same_image() {
     let dir = scene_dir();
     let reference = small_scene(dir.path(), "workload3.dpp", "64x48", &[]);
     for factor in [2f32.powi(50), 2f32.powi(-47)] {
-        let obj: String = common::SCENE_OBJ
+        let obj: String = crate::common::SCENE_OBJ
             .lines()
             .map(|line| match line.strip_prefix("v ") {
                 Some(xyz) => {

@@ -2,8 +2,6 @@
 //! pinned by a snapshot (docs/language.md §6). A change to the compiler that changes a plan
 //! shows up here as a readable diff.
 
-mod common;
-
 use dpp_runtime::compile::ir::OpKind;
 use dpp_runtime::compile::plan_text::plan_to_text;
 use dpp_runtime::{compile_file, CompileOptions};
@@ -11,13 +9,13 @@ use dpp_runtime::{compile_file, CompileOptions};
 #[test]
 fn plans_of_every_pipeline_fused_and_unfused() {
     let library = dpp_tracer::functor_library();
-    let pipelines = common::pipeline_files();
+    let pipelines = crate::common::pipeline_files();
     assert!(
         pipelines.len() >= 4,
         "pipelines went missing: {pipelines:?}"
     );
     for path in pipelines {
-        let name = common::pipeline_name(&path);
+        let name = crate::common::pipeline_name(&path);
         for fuse in [true, false] {
             let options = CompileOptions {
                 fuse,
@@ -34,7 +32,7 @@ fn plans_of_every_pipeline_fused_and_unfused() {
 #[test]
 fn fusion_never_adds_stages() {
     let library = dpp_tracer::functor_library();
-    for path in common::pipeline_files() {
+    for path in crate::common::pipeline_files() {
         let compile = |fuse| {
             compile_file(
                 &path,
@@ -72,7 +70,7 @@ fn fusion_never_adds_stages() {
 #[test]
 fn json_form_round_trips_through_serde() {
     let library = dpp_tracer::functor_library();
-    let path = common::repo().join("pipelines/workload1.dpp");
+    let path = crate::common::repo().join("pipelines/workload1.dpp");
     let plan = compile_file(&path, &library, &CompileOptions::default()).unwrap();
     let json: serde_json::Value = serde_json::to_value(&plan).unwrap();
     assert_eq!(json["pipeline"], "workload1");

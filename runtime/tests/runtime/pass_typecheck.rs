@@ -7,9 +7,7 @@
 //! the plan (`name: type, len = …` for arrays), then each stage's index space;
 //! or every diagnostic, one per line.
 
-mod common;
-
-use common::{check, diagnostics_text, trim_indent};
+use crate::common::{check, diagnostics_text, trim_indent};
 use dpp_runtime::compile::ir::{node_reads, node_writes, walk_nodes, Plan, VarType};
 use dpp_runtime::compile::plan_text::host_text;
 use dpp_runtime::cpu::column_pool::ColumnPool;
@@ -50,7 +48,7 @@ impl Functor for MakePair {
 }
 
 fn library() -> FunctorLibrary {
-    let mut library = common::library();
+    let mut library = crate::common::library();
     let pair = library.records.register(RecordType {
         name: "Pair".into(),
         fields: vec![("a".into(), ElemType::U32), ("b".into(), ElemType::F32)],
@@ -69,7 +67,7 @@ fn library() -> FunctorLibrary {
 
 fn compile(source: &str, library: &FunctorLibrary) -> Result<Plan, CompileFailure> {
     let path = Path::new("typecheck.dpp");
-    common::compile(path, &trim_indent(source), library, true)
+    crate::common::compile(path, &trim_indent(source), library, true)
 }
 
 /// The typed variables and the stages' index spaces, or the diagnostics.

@@ -5,8 +5,8 @@
 use dpp_dsl::{parse_module, render, Diagnostic, FileId, SourceMap};
 use proptest::prelude::*;
 
-const WORKLOAD3: &str = include_str!("data/workload3.dpp");
-const PRELUDE: &str = include_str!("data/prelude.dpp");
+const WORKLOAD3: &str = include_str!("../data/workload3.dpp");
+const PRELUDE: &str = include_str!("../data/prelude.dpp");
 
 /// Parses `text` and checks the result is well formed; returns the diagnostics.
 fn check(text: &str) -> Vec<Diagnostic> {

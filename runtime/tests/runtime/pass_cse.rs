@@ -7,15 +7,13 @@
 //! unfused stages), and through the whole compiler fused and unfused. All
 //! three must give the same outputs, which are listed last.
 
-mod common;
-
-use common::{check, compile, ops_text, pipelines_path, plan, run_text, trim_indent};
+use crate::common::{check, compile, ops_text, pipelines_path, plan, run_text, trim_indent};
 use dpp_runtime::compile::{cse, fuse, load, lower, resolve, typecheck};
 
 /// The ops after CSE and the outputs of the runs (which must agree).
 fn report(source: &str) -> String {
     let source = trim_indent(source);
-    let library = common::library();
+    let library = crate::common::library();
     let path = pipelines_path("cse_test.dpp");
 
     // Passes 1–4, as the driver runs them.

@@ -3,7 +3,7 @@
 
 use dpp_dsl::{location, parse_module, render, Diagnostic, SourceMap, Span};
 
-const WORKLOAD3: &str = include_str!("data/workload3.dpp");
+const WORKLOAD3: &str = include_str!("../data/workload3.dpp");
 
 /// Parses `source`, which must fail, and snapshots the rendered diagnostics.
 fn check(name: &str, source: &str) {

@@ -7,9 +7,7 @@
 //! one per line. A program that compiles is also RUN, fused and unfused (the
 //! two must agree), and its outputs are listed after the nodes.
 
-mod common;
-
-use common::{check, compile, diagnostics_text, ops_text, plan, run, trim_indent};
+use crate::common::{check, compile, diagnostics_text, ops_text, plan, run, trim_indent};
 use dpp_runtime::compile::{load, lower, resolve};
 use dpp_runtime::*;
 use std::path::Path;
@@ -40,7 +38,7 @@ impl Functor for Split {
 }
 
 fn library() -> FunctorLibrary {
-    let mut library = common::library();
+    let mut library = crate::common::library();
     library.register(Arc::new(Split {
         signature: Signature::map("split")
             .input("x", ElemType::U32)

@@ -10,15 +10,13 @@
 //! unfused plan (`--no-fuse`) has one op per stage and the same ops, and RUNS
 //! both: their outputs must be identical, and are listed after the plan.
 
-mod common;
-
-use common::{check, library, pipelines_path, run_text, trim_indent};
+use crate::common::{check, library, pipelines_path, run_text, trim_indent};
 use dpp_runtime::compile::ir::Plan;
 use dpp_runtime::compile::plan_text::plan_to_text;
 use dpp_runtime::FunctorLibrary;
 
 fn compile(source: &str, fuse: bool, library: &FunctorLibrary) -> Plan {
-    common::compile(&pipelines_path("fuse_test.dpp"), source, library, fuse)
+    crate::common::compile(&pipelines_path("fuse_test.dpp"), source, library, fuse)
         .unwrap_or_else(|e| panic!("{e}"))
 }
 

@@ -3,16 +3,14 @@
 //! unfused, and each deliberately broken plan below is caught with a message
 //! that names what is wrong.
 
-mod common;
-
-use common::{library, pipelines_path};
+use crate::common::{library, pipelines_path};
 use dpp_runtime::compile::ir::{Node, OpKind, Plan, VarId};
 use dpp_runtime::compile::validate::{validate_plan, PlanPhase};
 
 fn compiled(name: &str, fuse: bool) -> Plan {
     let path = pipelines_path(name);
     let source = std::fs::read_to_string(&path).unwrap();
-    common::compile(&path, &source, &library(), fuse).unwrap_or_else(|e| panic!("{e}"))
+    crate::common::compile(&path, &source, &library(), fuse).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// The validator's findings on the compaction example after `break_it`.
@@ -35,7 +33,7 @@ fn stage_positions(plan: &Plan) -> Vec<usize> {
 }
 
 /// The generic library's pipelines (the tracer's are validated by the
-/// compiler itself in every test that compiles them: `tests/plans.rs`).
+/// compiler itself in every test that compiles them: `tests/command/plans.rs`).
 #[test]
 fn every_example_pipeline_is_valid_fused_and_unfused() {
     for name in [

@@ -1,14 +1,15 @@
 //! `dpp bench` as a user runs it: the markdown tables, the JSON file and the
 //! chart of a tiny run on the built-in scene, and its answers to bad input.
 
-mod common;
-
-use common::{dpp, text};
+use crate::common::{dpp, text};
 
 use std::process::Command;
 
 fn pipelines() -> String {
-    common::repo().join("pipelines").display().to_string()
+    crate::common::repo()
+        .join("pipelines")
+        .display()
+        .to_string()
 }
 
 /// Every number under `value` (recursively) with its path.
@@ -263,7 +264,7 @@ element face 1\nproperty list uchar int vertex_indices\nend_header\n"
         bytes.extend(index.to_le_bytes());
     }
     std::fs::write(dir.path().join("square.ply"), &bytes).unwrap();
-    let workload1 = common::repo().join("pipelines/workload1.dpp");
+    let workload1 = crate::common::repo().join("pipelines/workload1.dpp");
     let output = dpp(
         &[
             "run",
@@ -413,7 +414,7 @@ fn a_gpu_bench_without_an_adapter_is_a_clear_error() {
 
 #[test]
 fn a_tiny_gpu_bench_names_the_adapter_and_times_stages() {
-    if !common::gpu_available("the GPU bench") {
+    if !crate::common::gpu_available("the GPU bench") {
         return;
     }
     let dir = tempfile::tempdir().unwrap();

@@ -1,0 +1,11 @@
+//! The `dpp` command's tests, one binary: every pipeline on both backends,
+//! plans, golden images, the CLI and `dpp bench`.
+
+mod backends;
+mod bench;
+mod cli;
+mod cli_citizen;
+#[path = "../common/mod.rs"]
+mod common;
+mod images;
+mod plans;
