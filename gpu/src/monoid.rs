@@ -4,7 +4,7 @@
 //! combining scatter performs per word (a compare-and-swap loop, which needs
 //! no forward progress between workgroups).
 
-use dpp_runtime::monoid::{monoid_name, MonoidOp};
+use dpp_runtime::monoid::MonoidOp;
 use dpp_runtime::types::ElemType;
 use dpp_runtime::wgsl::{element_wgsl, primitive_type_wgsl};
 use std::fmt::Write;
@@ -35,10 +35,10 @@ pub fn combine_function(op: MonoidOp, ty: ElemType, out: &mut String) -> Result<
     identity(op, ty)?;
     let t = type_name(ty)?;
     let short: String = t.chars().take_while(|c| *c != '<').collect();
-    let name = format!("monoid_{}_{short}", monoid_name(op));
+    let name = format!("monoid_{}_{short}", op.name());
     if !out.contains(&format!("fn {name}(")) {
         let statements = dpp_runtime::generic::monoid_statements(op, ty)
-            .ok_or_else(|| format!("`{}` is not defined on {ty:?} elements", monoid_name(op)))?;
+            .ok_or_else(|| format!("`{}` is not defined on {ty:?} elements", op.name()))?;
         let _ = writeln!(out, "fn {name}(a: {t}, b: {t}) -> {t} {{ {statements} }}");
     }
     Ok(name)

@@ -7,8 +7,7 @@
 use crate::column::{Column, ColumnView};
 use crate::error::ErrorKind;
 use crate::host::HostValue;
-use crate::monoid::{monoid_name, MonoidOp};
-use crate::types::ElemType;
+use crate::types::{ElemType, MonoidOp};
 use glam::{Vec2, Vec3, Vec4};
 use std::fmt;
 
@@ -30,7 +29,7 @@ pub enum KernelError {
     },
     #[error("{found:?} elements where {expected:?} elements were expected")]
     TypeMismatch { expected: ElemType, found: ElemType },
-    #[error("`{}` is not defined on {ty:?} elements", monoid_name(*.op))]
+    #[error("`{}` is not defined on {ty:?} elements", .op.name())]
     UnsupportedOperation { op: MonoidOp, ty: ElemType },
     #[error("a group needs at least one element")]
     EmptyGroup,

@@ -11,29 +11,7 @@ use crate::elem::{
 use crate::types::ElemType;
 use glam::{Vec2, Vec3, Vec4};
 
-/// The associative operations the backends implement natively for `reduce`, `scan`
-/// and combining `scatter` (their identities are well known per element type).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
-pub enum MonoidOp {
-    Add,
-    Mul,
-    Min,
-    Max,
-    Or,
-    And,
-}
-
-/// The functor that performs `op`, as pipelines spell it.
-pub fn monoid_name(op: MonoidOp) -> &'static str {
-    match op {
-        MonoidOp::Add => "add",
-        MonoidOp::Mul => "mul",
-        MonoidOp::Min => "min",
-        MonoidOp::Max => "max",
-        MonoidOp::Or => "or",
-        MonoidOp::And => "and",
-    }
-}
+pub use crate::types::MonoidOp;
 
 /// The monoid operations of an element type. Which ones exist: `add`, `mul`,
 /// `min`, `max` on `u32`, `i32`, `f32` and (componentwise) `vec2`–`vec4`;

@@ -157,3 +157,29 @@ impl HostType {
         }
     }
 }
+
+/// The associative operations the backends implement natively for `reduce`, `scan`
+/// and combining `scatter` (their identities are well known per element type).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+pub enum MonoidOp {
+    Add,
+    Mul,
+    Min,
+    Max,
+    Or,
+    And,
+}
+
+impl MonoidOp {
+    /// The functor that performs the operation, as pipelines spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            MonoidOp::Add => "add",
+            MonoidOp::Mul => "mul",
+            MonoidOp::Min => "min",
+            MonoidOp::Max => "max",
+            MonoidOp::Or => "or",
+            MonoidOp::And => "and",
+        }
+    }
+}
