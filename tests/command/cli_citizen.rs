@@ -67,19 +67,24 @@ fn workload1_args() -> Vec<String> {
     .to_vec()
 }
 
-#[test]
-fn a_closed_stdout_ends_the_messages_not_the_run() {
-    let dir = scene_dir();
+/// `dpp ARGS` in `dir` whose stdout's reader goes away before the first
+/// message (`dpp … | head -0`).
+fn run_with_stdout_closed(args: &[String], dir: &Path) -> Output {
     let mut child = Command::new(BIN)
-        .args(workload1_args())
-        .current_dir(dir.path())
+        .args(args)
+        .current_dir(dir)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // The reader goes away before the first message (`dpp run … | head -0`).
     drop(child.stdout.take());
-    let output = child.wait_with_output().unwrap();
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn a_closed_stdout_ends_the_messages_not_the_run() {
+    let dir = scene_dir();
+    let output = run_with_stdout_closed(&workload1_args(), dir.path());
     let stderr = text(&output.stderr);
     assert_eq!(output.status.code(), Some(0), "{stderr}");
     assert!(
@@ -101,14 +106,7 @@ fn a_closed_stdout_ends_the_messages_not_the_run() {
         vec!["plan".to_string(), pipeline("workload3.dpp")],
         vec!["functors".to_string()],
     ] {
-        let mut child = Command::new(BIN)
-            .args(&args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        drop(child.stdout.take());
-        let output = child.wait_with_output().unwrap();
+        let output = run_with_stdout_closed(&args, dir.path());
         let stderr = text(&output.stderr);
         assert_eq!(output.status.code(), Some(0), "dpp {args:?}: {stderr}");
         assert!(stderr.is_empty(), "dpp {args:?}: {stderr}");
