@@ -219,6 +219,11 @@ impl Ranks {
                 })
                 .collect();
             let total: usize = counts.iter().map(|c| *c as usize).sum();
+            if total == 0 {
+                // Every rank knows; and two empty Vecs share one dangling
+                // pointer, which Open MPI rejects as aliased buffers.
+                return vec![Vec::new(); self.size];
+            }
             let mut all = vec![0u8; total];
             {
                 let mut partition = PartitionMut::new(&mut all[..], &counts[..], &displs[..]);

@@ -215,8 +215,7 @@ pub fn plan(schedule: &CompositeSchedule, p: usize, n: usize, order: &[usize]) -
             }
             held[leaver] = 0..0;
         }
-        for v in extra..folded {
-            let r = virtual_rank[v];
+        for &r in &virtual_rank[extra..] {
             steps[r].keep = 0..n;
             steps[r].blend = if n > 0 { vec![Source::Own] } else { Vec::new() };
         }
@@ -386,12 +385,15 @@ mod tests {
     /// Runs the plan in memory: each rank's pixel `i` starts as its rank id
     /// in brackets; the blend concatenates (associative, not commutative).
     /// Returns rank 0's gathered image and checks every step's bookkeeping.
+    /// Messages in flight to each rank: (sender, pixels, values).
+    type Inbox = Vec<Vec<(usize, Range<usize>, Vec<String>)>>;
+
     fn simulate(plan: &Plan) -> Vec<String> {
         let (p, n) = (plan.ranks, plan.pixels);
         let mut held: Vec<(Range<usize>, Vec<String>)> =
             (0..p).map(|r| (0..n, vec![format!("[{r}]"); n])).collect();
         for round in &plan.rounds {
-            let mut inbox: Vec<Vec<(usize, Range<usize>, Vec<String>)>> = vec![Vec::new(); p];
+            let mut inbox: Inbox = vec![Vec::new(); p];
             for (r, step) in round.iter().enumerate() {
                 let (range, data) = &held[r];
                 for t in &step.sends {
