@@ -10,6 +10,7 @@ pub mod marching_cubes_tables;
 pub mod mesh;
 pub mod mesh_write;
 pub mod obj;
+pub mod partition;
 pub mod ply;
 mod prefetch;
 pub mod scene;
@@ -67,6 +68,7 @@ pub fn register_tracer_functors(library: &mut FunctorLibrary) -> TracerRecords {
         Arc::new(reflect::Reflect::new(surface, ray)),
         Arc::new(alive::Alive::new(ray)),
         Arc::new(anti_alias::AntiAlias::new()),
+        Arc::new(global_id::GlobalId::new()),
     ];
     for functor in functors {
         library.register(functor);
@@ -192,6 +194,7 @@ mod tests {
             "reflect",
             "alive",
             "antiAlias",
+            "globalId",
         ] {
             assert!(library.get(name).is_some(), "{name}");
         }
@@ -208,6 +211,7 @@ mod tests {
                 "alive",
                 "antiAlias",
                 "cameraRay",
+                "globalId",
                 "intersect",
                 "normalColor",
                 "occRayGen",
@@ -275,6 +279,7 @@ mod tests {
             "map          alive(ray: Ray) -> (alive: bool)",
             "group        antiAlias(color: vec3) -> (pixel: vec3)",
             "map          normalColor(ray: Ray, hit: Hit) -> (color: vec3)",
+            "map          globalId(prim: u32) -> (id: u32)",
         ];
         for line in expected {
             let name = line.split_whitespace().nth(1).unwrap();

@@ -8,6 +8,8 @@ use crate::functors::wgsl::buffers::{CameraGpuBuffers, SceneGpuBuffers, ShadingG
 use crate::mesh::{Bounds, MeshError, TriangleMesh};
 use crate::obj::{load_obj_with_materials, ObjError};
 use crate::shading::{MeshMaterials, Shading};
+use crate::MISS_PRIM;
+use dpp_runtime::wgsl::GpuBuffer;
 use glam::Vec3;
 use std::path::Path;
 use std::sync::Arc;
@@ -23,6 +25,8 @@ pub enum SceneError {
     Mesh(#[from] MeshError),
     #[error("invalid materials: {0}")]
     Materials(String),
+    #[error("invalid global triangle ids: {0}")]
+    GlobalIds(String),
 }
 
 /// Faces meeting at more than this angle keep a sharp edge between them when
@@ -44,6 +48,12 @@ pub struct TraceScene {
     /// The fields above in the WGSL twins' layouts, built on first use (a
     /// scene is not changed once built).
     gpu_buffers: BuiltOnce<SceneGpuBuffers>,
+    /// Each triangle's id in the whole data set, when the scene is one part of
+    /// a distributed one ([`TraceScene::with_global_ids`]); `None`: the ids are
+    /// the triangles' own indices.
+    global_ids: Option<Arc<Vec<u32>>>,
+    /// `global_ids` as `globalId`'s twin reads it, built on first use.
+    global_id_buffer: BuiltOnce<GpuBuffer>,
 }
 
 impl TraceScene {
@@ -76,6 +86,69 @@ impl TraceScene {
             bounds,
             materials,
             gpu_buffers: BuiltOnce::default(),
+            global_ids: None,
+            global_id_buffer: BuiltOnce::default(),
+        })
+    }
+
+    /// The scene as one part of a distributed data set: `ids[t]` is triangle
+    /// `t`'s id in the whole data set (what the `globalId` functor gives for
+    /// `prim = t`; `prim` itself stays local, the index into this mesh).
+    /// There must be one id per triangle, none of them `u32::MAX` (a miss).
+    pub fn with_global_ids(mut self, ids: Arc<Vec<u32>>) -> Result<TraceScene, SceneError> {
+        if ids.len() != self.mesh.triangles.len() {
+            return Err(SceneError::GlobalIds(format!(
+                "{} ids for {} triangles",
+                ids.len(),
+                self.mesh.triangles.len()
+            )));
+        }
+        if let Some(t) = ids.iter().position(|&id| id == MISS_PRIM) {
+            return Err(SceneError::GlobalIds(format!(
+                "triangle {t} has id {MISS_PRIM}, which marks a miss"
+            )));
+        }
+        self.global_ids = Some(ids);
+        self.global_id_buffer = BuiltOnce::default();
+        Ok(self)
+    }
+
+    /// Each triangle's id in the whole data set, if the scene has a table.
+    pub fn global_ids(&self) -> Option<&Arc<Vec<u32>>> {
+        self.global_ids.as_ref()
+    }
+
+    /// The id in the whole data set of triangle `prim`: its entry in the
+    /// table, `prim` itself without a table, [`MISS_PRIM`] for a miss;
+    /// `None` for a triangle past the table's end.
+    #[inline]
+    pub fn global_id(&self, prim: u32) -> Option<u32> {
+        if prim == MISS_PRIM {
+            return Some(MISS_PRIM);
+        }
+        match &self.global_ids {
+            None => Some(prim),
+            Some(ids) => ids.get(prim as usize).copied(),
+        }
+    }
+
+    /// The global id table as `globalId`'s twin reads it: word 0 is 1 when
+    /// there is a table (0 without one), then the ids (built once).
+    pub fn global_id_gpu_buffer(&self) -> &GpuBuffer {
+        self.global_id_buffer.get_or_init(|| {
+            let mut words = Vec::with_capacity(1 + self.mesh.triangles.len());
+            match &self.global_ids {
+                Some(ids) => {
+                    words.push(1);
+                    words.extend(ids.iter());
+                }
+                None => words.push(0),
+            }
+            GpuBuffer {
+                name: "tracer_global_ids",
+                wgsl_type: "array<u32>",
+                data: Arc::from(words),
+            }
         })
     }
 

@@ -22,6 +22,7 @@ pub mod camera_ray;
 pub mod case_triangles;
 pub mod cube_case;
 pub mod cube_triangle;
+pub mod global_id;
 pub mod intersect;
 #[cfg(feature = "embree")]
 pub mod intersect_embree;

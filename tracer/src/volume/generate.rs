@@ -13,7 +13,7 @@
 //!   (the paper's "lead telluride"); isosurface at [`PBTE_DEFAULT_LEVEL`].
 //! - [`sphere`], [`plane`]: signed distances (level 0) for testing meshing.
 
-use super::{sample_count, Volume, VolumeError, MAX_SAMPLES};
+use super::{sample_count, Brick, Volume, VolumeError, MAX_SAMPLES};
 use dpp_runtime::random::SplitMix64;
 use glam::{UVec3, Vec3};
 use rayon::prelude::*;
@@ -82,6 +82,21 @@ impl Dataset {
     /// Generates the data set on a `dims` grid (checked: at least 2 samples per
     /// axis, at most [`MAX_SAMPLES`]).
     pub fn generate(self, dims: UVec3) -> Result<Volume, VolumeError> {
+        self.generate_box(dims, [UVec3::ZERO, dims])
+    }
+
+    /// The samples of `brick` (its `samples` box, ghost layers included) of
+    /// the data set on a `dims` grid: bit for bit the same sub-box of
+    /// [`Dataset::generate`]'s volume, with `first` the box's lowest sample.
+    pub fn generate_brick(self, dims: UVec3, brick: &Brick) -> Result<Volume, VolumeError> {
+        self.generate_box(dims, brick.samples)
+    }
+
+    /// The samples `[samples[0], samples[1])` of the data set on a `dims` grid.
+    /// Every generator is a pointwise function of the global sample index (and
+    /// of `dims`, which sets the spacing), so any box is the same as that box
+    /// of the whole volume, bit for bit.
+    pub fn generate_box(self, dims: UVec3, samples: [UVec3; 2]) -> Result<Volume, VolumeError> {
         if dims.cmplt(UVec3::splat(2)).any() {
             return Err(VolumeError::BadGenerateDims {
                 dims,
@@ -94,10 +109,17 @@ impl Dataset {
                 what: "too many samples (at most 2^31)",
             });
         }
+        if samples[0].cmpgt(samples[1]).any() || samples[1].cmpgt(dims).any() {
+            return Err(VolumeError::BadGenerateDims {
+                dims,
+                what: "the box of samples asked for is not inside the grid",
+            });
+        }
+        let grid = Grid { dims, samples };
         Ok(match self {
-            Dataset::RichtmyerMeshkov => richtmyer_meshkov(dims),
-            Dataset::LeadTelluride => lead_telluride(dims),
-            Dataset::Sphere => sphere(dims, DEFAULT_SPHERE_RADIUS),
+            Dataset::RichtmyerMeshkov => RichtmyerMeshkov::default().generate_in(grid),
+            Dataset::LeadTelluride => lead_telluride_in(grid),
+            Dataset::Sphere => sphere_in(grid, DEFAULT_SPHERE_RADIUS),
         })
     }
 }
@@ -108,38 +130,65 @@ pub fn by_name(name: &str, dims: UVec3) -> Result<Volume, VolumeError> {
     Dataset::from_name(name)?.generate(dims)
 }
 
-/// A `dims` volume over `[-1, 1]³`, filled one z slice at a time in parallel by
-/// `fill(k, z, slice)` (`slice` is x fastest; `z` the world coordinate of slice `k`).
+/// The box `[samples[0], samples[1])` of a `dims` grid over `[-1, 1]³`.
+#[derive(Clone, Copy, Debug)]
+struct Grid {
+    dims: UVec3,
+    samples: [UVec3; 2],
+}
+
+impl Grid {
+    fn whole(dims: UVec3) -> Grid {
+        Grid {
+            dims,
+            samples: [UVec3::ZERO, dims],
+        }
+    }
+
+    /// World coordinates of the box's samples along `axis` (global indices).
+    fn coordinates(&self, axis: usize) -> Vec<f32> {
+        let step = 2.0 / (self.dims[axis].max(2) - 1) as f32;
+        (self.samples[0][axis]..self.samples[1][axis])
+            .map(|i| -1.0 + step * i as f32)
+            .collect()
+    }
+}
+
+/// The box of a `dims` volume over `[-1, 1]³`, filled one z slice at a time in
+/// parallel by `fill(k, z, slice)` (`slice` is x fastest; `k` the slice's
+/// index in the box, `z` its world coordinate, from its global index).
 /// Dimensions below 2 give a single sample at -1 along that axis.
-fn unit_cube(dims: UVec3, fill: impl Fn(usize, f32, &mut [f32]) + Sync) -> Volume {
+fn unit_cube(grid: Grid, fill: impl Fn(usize, f32, &mut [f32]) + Sync) -> Volume {
+    let dims = grid.dims;
     let spacing = Vec3::from_array(dims.to_array().map(|n| 2.0 / (n.max(2) - 1) as f32));
     let origin = Vec3::splat(-1.0);
-    let plane = dims.x as usize * dims.y as usize;
-    let mut values = vec![0.0f32; plane * dims.z as usize];
+    let local = grid.samples[1].saturating_sub(grid.samples[0]);
+    let zs = grid.coordinates(2);
+    let plane = local.x as usize * local.y as usize;
+    let mut values = vec![0.0f32; plane * local.z as usize];
     if plane > 0 {
         values
             .par_chunks_mut(plane)
             .enumerate()
-            .for_each(|(k, slice)| fill(k, origin.z + spacing.z * k as f32, slice));
+            .for_each(|(k, slice)| fill(k, zs[k], slice));
     }
     Volume {
-        dims,
+        dims: local,
         spacing,
         origin,
+        first: grid.samples[0],
         values,
     }
 }
 
-/// World coordinates of the samples along one axis.
-fn axis_coordinates(samples: u32) -> Vec<f32> {
-    let step = 2.0 / (samples.max(2) - 1) as f32;
-    (0..samples).map(|i| -1.0 + step * i as f32).collect()
-}
-
 /// `|p| - radius` over `[-1, 1]³`: negative inside a sphere at the centre.
 pub fn sphere(dims: UVec3, radius: f32) -> Volume {
-    let (xs, ys) = (axis_coordinates(dims.x), axis_coordinates(dims.y));
-    unit_cube(dims, |_, z, slice| {
+    sphere_in(Grid::whole(dims), radius)
+}
+
+fn sphere_in(grid: Grid, radius: f32) -> Volume {
+    let (xs, ys) = (grid.coordinates(0), grid.coordinates(1));
+    unit_cube(grid, |_, z, slice| {
         for (row, y) in slice.chunks_exact_mut(xs.len()).zip(&ys) {
             for (value, x) in row.iter_mut().zip(&xs) {
                 *value = Vec3::new(*x, *y, z).length() - radius;
@@ -152,8 +201,9 @@ pub fn sphere(dims: UVec3, radius: f32) -> Volume {
 /// means +z): negative on the side opposite `normal`.
 pub fn plane(dims: UVec3, normal: Vec3, offset: f32) -> Volume {
     let n = normal.normalize_or(Vec3::Z);
-    let (xs, ys) = (axis_coordinates(dims.x), axis_coordinates(dims.y));
-    unit_cube(dims, |_, z, slice| {
+    let grid = Grid::whole(dims);
+    let (xs, ys) = (grid.coordinates(0), grid.coordinates(1));
+    unit_cube(grid, |_, z, slice| {
         for (row, y) in slice.chunks_exact_mut(xs.len()).zip(&ys) {
             for (value, x) in row.iter_mut().zip(&xs) {
                 *value = Vec3::new(*x, *y, z).dot(n) - offset;
@@ -225,14 +275,25 @@ pub fn richtmyer_meshkov(dims: UVec3) -> Volume {
 
 impl RichtmyerMeshkov {
     pub fn generate(&self, dims: UVec3) -> Volume {
+        self.generate_in(Grid::whole(dims))
+    }
+
+    /// The box `[samples[0], samples[1])` of [`RichtmyerMeshkov::generate`]'s
+    /// `dims` volume, bit for bit (the field is a pointwise function of the
+    /// global sample index). The box must lie inside the grid.
+    pub fn generate_box(&self, dims: UVec3, samples: [UVec3; 2]) -> Volume {
+        self.generate_in(Grid { dims, samples })
+    }
+
+    fn generate_in(&self, grid: Grid) -> Volume {
         let mut random = SplitMix64::new(self.seed);
         let interface = Modes::random(&mut random, RM_INTERFACE_MODES, RM_INTERFACE_K, false);
         let folding = Modes::random(&mut random, RM_FOLDING_MODES, RM_FOLDING_K, true);
         let mixing = self.mixing.max(0.0);
         let (xs, ys, zs) = (
-            axis_coordinates(dims.x),
-            axis_coordinates(dims.y),
-            axis_coordinates(dims.z),
+            grid.coordinates(0),
+            grid.coordinates(1),
+            grid.coordinates(2),
         );
 
         // h(x, y) per column: bubbles and spikes.
@@ -253,7 +314,7 @@ impl RichtmyerMeshkov {
         let folding_x = folding.phasors(&xs, 0, true);
         let folding_y = folding.phasors(&ys, 1, false);
         let folding_z = folding.phasors(&zs, 2, false);
-        unit_cube(dims, |k, z, slice| {
+        unit_cube(grid, |k, z, slice| {
             let along_z = folding_z.row(k);
             for (j, (row, row_heights)) in slice
                 .chunks_exact_mut(xs.len())
@@ -445,6 +506,10 @@ const BOND_SIGMA: f32 = 0.08;
 /// (peak 0.35 half way, falling as `sin²` to 0 at the atoms). At [`PBTE_DEFAULT_LEVEL`] atoms of two sizes appear joined by
 /// thin tubes.
 pub fn lead_telluride(dims: UVec3) -> Volume {
+    lead_telluride_in(Grid::whole(dims))
+}
+
+fn lead_telluride_in(grid: Grid) -> Volume {
     let sites = 2.0 * PBTE_UNIT_CELLS as f32;
     // Lattice coordinate q in [0, sites] along each axis, and per sample the
     // 1D factors of the Gaussians of the two surrounding sites and of the
@@ -459,8 +524,8 @@ pub fn lead_telluride(dims: UVec3) -> Volume {
         /// Along a bond line: `sin²(π q)`, 0 at the atoms, 1 half way.
         along: f32,
     }
-    let factors = |samples: u32| -> Vec<AxisFactors> {
-        axis_coordinates(samples)
+    let factors = |axis: usize| -> Vec<AxisFactors> {
+        grid.coordinates(axis)
             .into_iter()
             .map(|c| {
                 let q = (c + 1.0) * 0.5 * sites;
@@ -478,9 +543,9 @@ pub fn lead_telluride(dims: UVec3) -> Volume {
             })
             .collect()
     };
-    let (fx, fy) = (factors(dims.x), factors(dims.y));
-    let fz = factors(dims.z);
-    unit_cube(dims, |k, _, slice| {
+    let (fx, fy) = (factors(0), factors(1));
+    let fz = factors(2);
+    unit_cube(grid, |k, _, slice| {
         let az = &fz[k];
         for (row, ay) in slice.chunks_exact_mut(fx.len()).zip(&fy) {
             for (value, ax) in row.iter_mut().zip(&fx) {
@@ -509,7 +574,7 @@ pub fn lead_telluride(dims: UVec3) -> Volume {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -618,5 +683,59 @@ mod tests {
             Dataset::from_name("pbte").unwrap().default_level(),
             PBTE_DEFAULT_LEVEL
         );
+    }
+
+    /// The sub-box `[lo, hi)` of `whole`, with `first = lo`.
+    pub(crate) fn sub_box(whole: &Volume, lo: UVec3, hi: UVec3) -> Volume {
+        let mut values = Vec::new();
+        for k in lo.z..hi.z {
+            for j in lo.y..hi.y {
+                for i in lo.x..hi.x {
+                    values.push(whole.value(i, j, k));
+                }
+            }
+        }
+        Volume {
+            dims: hi - lo,
+            spacing: whole.spacing,
+            origin: whole.origin,
+            first: lo,
+            values,
+        }
+    }
+
+    #[test]
+    fn bricks_equal_the_same_sub_box_of_the_whole_volume_bit_for_bit() {
+        use crate::volume::kd_bricks;
+        let dims = UVec3::new(17, 13, 11);
+        for dataset in [
+            Dataset::RichtmyerMeshkov,
+            Dataset::LeadTelluride,
+            Dataset::Sphere,
+        ] {
+            let whole = dataset.generate(dims).unwrap();
+            for parts in 1..=5 {
+                for brick in kd_bricks(dims - UVec3::ONE, parts) {
+                    let part = dataset.generate_brick(dims, &brick).unwrap();
+                    let expected = sub_box(&whole, brick.samples[0], brick.samples[1]);
+                    assert_eq!(part.dims, expected.dims);
+                    assert_eq!(part.first, expected.first);
+                    assert_eq!(part.spacing, expected.spacing);
+                    assert_eq!(part.origin, expected.origin);
+                    let bits =
+                        |v: &Volume| v.values.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&part), bits(&expected), "{dataset:?} {brick:?}");
+                    // Positions and bounds are the whole volume's.
+                    let last = part.dims - UVec3::ONE;
+                    let global = part.first + last;
+                    assert_eq!(
+                        part.position(last.x, last.y, last.z),
+                        whole.position(global.x, global.y, global.z)
+                    );
+                }
+            }
+        }
+        let bad = Dataset::Sphere.generate_box(dims, [UVec3::ZERO, dims + UVec3::X]);
+        assert!(bad.is_err());
     }
 }

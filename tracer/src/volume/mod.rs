@@ -9,10 +9,12 @@
 //!   data: a loader keeps NaNs, which some files use to mark "no data").
 //! - [`Volume::write_nifti`] writes a volume as NIfTI-1 (f32, little endian).
 
+pub mod brick;
 pub mod generate;
 pub mod nifti;
 pub mod raw;
 
+pub use brick::{kd_bricks, Brick};
 pub use raw::{RawSpec, RawType};
 
 use crate::mesh::Bounds;
@@ -24,12 +26,20 @@ use thiserror::Error;
 pub const MAX_SAMPLES: u64 = 1 << 31;
 
 /// Samples on a regular grid, x fastest: sample `(i, j, k)` is at
-/// `origin + spacing * (i, j, k)` and stored at `i + dims.x * (j + dims.y * k)`.
+/// `origin + spacing * (first + (i, j, k))` and stored at
+/// `i + dims.x * (j + dims.y * k)`.
+///
+/// `first` is the global index of sample `(0, 0, 0)` when the volume is a
+/// brick of a larger one ([`brick`]; zero for a whole volume): positions are
+/// computed from the global index, so a brick's are bit-identical to the
+/// whole volume's (folding `first` into `origin` would round differently).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Volume {
     pub dims: UVec3,
     pub spacing: Vec3,
     pub origin: Vec3,
+    /// The global index of sample `(0, 0, 0)`; zero for a whole volume.
+    pub first: UVec3,
     pub values: Vec<f32>,
 }
 
@@ -135,6 +145,24 @@ fn suggestion_text(suggestion: &Option<&'static str>) -> String {
     }
 }
 
+/// Fails unless the name ends in `.nii`, `.nii.gz`, `.hdr` or `.hdr.gz`.
+fn check_nifti_name(path: &Path) -> Result<(), VolumeError> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if [".nii", ".nii.gz", ".hdr", ".hdr.gz"]
+        .iter()
+        .any(|ext| name.ends_with(ext))
+    {
+        Ok(())
+    } else {
+        Err(VolumeError::UnknownFileType {
+            path: path.to_path_buf(),
+        })
+    }
+}
+
 /// Number of samples of `dims`, as u64 (never overflows).
 pub(crate) fn sample_count(dims: [u64; 3]) -> u64 {
     dims[0].saturating_mul(dims[1]).saturating_mul(dims[2])
@@ -150,19 +178,52 @@ impl Volume {
         if let Some(spec) = raw {
             return raw::read_raw(path, &spec);
         }
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().to_ascii_lowercase())
-            .unwrap_or_default();
-        if [".nii", ".nii.gz", ".hdr", ".hdr.gz"]
-            .iter()
-            .any(|ext| name.ends_with(ext))
-        {
-            nifti::read_nifti(path)
-        } else {
-            Err(VolumeError::UnknownFileType {
-                path: path.to_path_buf(),
-            })
+        check_nifti_name(path)?;
+        nifti::read_nifti(path)
+    }
+
+    /// The sample dimensions of the volume [`Volume::load`] would read, from the
+    /// raw spec (after checking the file's size) or the NIfTI header alone:
+    /// what a caller needs to split the volume into bricks before reading one.
+    pub fn read_dims(path: impl AsRef<Path>, raw: Option<RawSpec>) -> Result<UVec3, VolumeError> {
+        let path = path.as_ref();
+        match raw {
+            Some(spec) => raw::raw_dims(path, &spec),
+            None => {
+                check_nifti_name(path)?;
+                nifti::nifti_dims(path)
+            }
+        }
+    }
+
+    /// Reads only `brick`'s samples (its `samples` box, ghost layers
+    /// included) of the volume [`Volume::load`] would read: the same values
+    /// as that box of the whole volume, with `first` its lowest sample. Raw
+    /// and uncompressed NIfTI files are read by seeking, row by row; a gzipped
+    /// NIfTI file is decompressed as a stream (see [`nifti::read_nifti_box`]:
+    /// every reader decompresses up to its brick, but keeps only its brick).
+    pub fn load_brick(
+        path: impl AsRef<Path>,
+        raw: Option<RawSpec>,
+        brick: &Brick,
+    ) -> Result<Volume, VolumeError> {
+        Volume::load_box(path, raw, brick.samples)
+    }
+
+    /// Reads only the samples `[samples[0], samples[1])` (global indices,
+    /// inside the volume) of the volume [`Volume::load`] would read.
+    pub fn load_box(
+        path: impl AsRef<Path>,
+        raw: Option<RawSpec>,
+        samples: [UVec3; 2],
+    ) -> Result<Volume, VolumeError> {
+        let path = path.as_ref();
+        match raw {
+            Some(spec) => raw::read_raw_box(path, &spec, samples),
+            None => {
+                check_nifti_name(path)?;
+                nifti::read_nifti_box(path, samples)
+            }
         }
     }
 
@@ -218,6 +279,7 @@ impl Volume {
             dims,
             spacing,
             origin,
+            first: UVec3::ZERO,
             values,
         }
     }
@@ -240,8 +302,10 @@ impl Volume {
         self.values[self.index(i, j, k)]
     }
 
+    /// The world position of sample `(i, j, k)`: `origin + spacing * (first +
+    /// (i, j, k))`, the global index converted to f32 once.
     pub fn position(&self, i: u32, j: u32, k: u32) -> Vec3 {
-        self.origin + self.spacing * Vec3::new(i as f32, j as f32, k as f32)
+        self.origin + self.spacing * (self.first + UVec3::new(i, j, k)).as_vec3()
     }
 
     /// Cells are the cubes between 2×2×2 neighbouring samples.
@@ -265,13 +329,16 @@ impl Volume {
             })
     }
 
-    /// The world-space box spanned by the samples, from the first sample's position
-    /// to the last's (min ≤ max even where a spacing is negative).
+    /// The world-space box spanned by the samples the volume holds, from the
+    /// first sample's position to the last's (min ≤ max even where a spacing is
+    /// negative).
     pub fn bounds(&self) -> Bounds {
-        let last = self.origin + self.spacing * self.dims.saturating_sub(UVec3::ONE).as_vec3();
+        let first = self.position(0, 0, 0);
+        let last = self.dims.saturating_sub(UVec3::ONE);
+        let last = self.position(last.x, last.y, last.z);
         Bounds {
-            min: self.origin.min(last),
-            max: self.origin.max(last),
+            min: first.min(last),
+            max: first.max(last),
         }
     }
 
@@ -351,6 +418,7 @@ mod tests {
             dims,
             spacing: Vec3::new(0.5, 2.0, 1.0),
             origin: Vec3::new(1.0, -1.0, 3.0),
+            first: UVec3::ZERO,
             values: vec![0.0; (dims.x * dims.y * dims.z) as usize],
         };
         for k in 0..dims.z {

@@ -21,7 +21,7 @@ use flate2::write::GzEncoder;
 use flate2::Compression;
 use glam::{UVec3, Vec3};
 use std::fs::File;
-use std::io::{self, BufRead, BufReader, BufWriter, Read, Write};
+use std::io::{self, BufRead, BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 /// Size of a NIfTI-1 header.
@@ -396,8 +396,148 @@ pub fn read_nifti(path: &Path) -> Result<Volume, VolumeError> {
         dims: UVec3::new(x, y, z),
         spacing: layout.spacing,
         origin: layout.origin,
+        first: UVec3::ZERO,
         values,
     })
+}
+
+/// The header of a NIfTI-1 file, checked, with the reader positioned after it.
+fn read_header(path: &Path) -> Result<(Header, Endian, Layout, Box<dyn Read>), VolumeError> {
+    let mut reader = open(path)?;
+    let bytes = read_up_to(&mut reader, HEADER_SIZE as u64, path)?;
+    let Ok(bytes) = <[u8; HEADER_SIZE]>::try_from(bytes.as_slice()) else {
+        return Err(VolumeError::Truncated {
+            path: path.to_path_buf(),
+            what: "the NIfTI-1 header".into(),
+            needed: HEADER_SIZE as u64,
+            actual: bytes.len() as u64,
+        });
+    };
+    let (header, endian) = Header::parse(&bytes, path)?;
+    let layout = Layout::of(&header, path)?;
+    if header.magic == MAGIC_SINGLE && layout.vox_offset < HEADER_SIZE as u64 {
+        return Err(bad_header(
+            path,
+            format!(
+                "vox_offset {} lies inside the {HEADER_SIZE}-byte header",
+                layout.vox_offset
+            ),
+        ));
+    }
+    Ok((header, endian, layout, reader))
+}
+
+/// The sample dimensions of a NIfTI-1 file, from its header alone (the
+/// header is checked as [`read_nifti`] checks it; the samples are not read).
+pub fn nifti_dims(path: &Path) -> Result<UVec3, VolumeError> {
+    let (_, _, layout, _) = read_header(path)?;
+    let [x, y, z] = layout.dims.map(|d| d as u32);
+    Ok(UVec3::new(x, y, z))
+}
+
+/// Reads only the samples `[samples[0], samples[1])` (global indices) of a
+/// NIfTI-1 volume, with `first = samples[0]`; otherwise as [`read_nifti`].
+///
+/// An uncompressed file is read by seeking: one `seek` and `read_exact` per
+/// contiguous run of the box (a row, or more where the box spans whole rows
+/// or slices). A gzipped file cannot seek: it is decompressed as a stream up
+/// to the box's last sample, keeping only the box's samples, so every reader
+/// of a brick pays for decompressing the file up to its brick (the whole file
+/// for the last one) while its memory stays the size of its brick.
+pub fn read_nifti_box(path: &Path, samples: [UVec3; 2]) -> Result<Volume, VolumeError> {
+    let (header, endian, layout, header_reader) = read_header(path)?;
+    let [x, y, z] = layout.dims.map(|d| d as u32);
+    let dims = UVec3::new(x, y, z);
+    super::raw::check_box(path, dims, samples)?;
+    let single = header.magic == MAGIC_SINGLE;
+    let data_path = if single {
+        path.to_path_buf()
+    } else {
+        image_path(path)
+    };
+    let size = layout.datatype.size() as u64;
+    let local = samples[1] - samples[0];
+    let mut data = vec![0u8; (sample_count(local.as_u64vec3().to_array()) * size) as usize];
+    let runs = super::raw::box_runs(dims, samples);
+    let truncated = |actual: u64| {
+        let [x, y, z] = layout.dims;
+        VolumeError::Truncated {
+            path: data_path.clone(),
+            what: format!(
+                "{x}×{y}×{z} {} samples from byte {}",
+                layout.datatype.name(),
+                layout.vox_offset
+            ),
+            needed: layout.vox_offset + layout.data_bytes,
+            actual,
+        }
+    };
+    let gzipped = {
+        let mut file = BufReader::new(File::open(&data_path).map_err(io_error(&data_path))?);
+        file.fill_buf()
+            .map_err(io_error(&data_path))?
+            .starts_with(&[0x1f, 0x8b])
+    };
+    if !gzipped {
+        let mut file = File::open(&data_path).map_err(io_error(&data_path))?;
+        let file_size = file.metadata().map_err(io_error(&data_path))?.len();
+        if file_size < layout.vox_offset + layout.data_bytes {
+            return Err(truncated(file_size));
+        }
+        let mut at = 0usize;
+        for (offset, count) in runs {
+            let bytes = (count * size) as usize;
+            file.seek(SeekFrom::Start(layout.vox_offset + offset * size))
+                .map_err(io_error(&data_path))?;
+            file.read_exact(&mut data[at..at + bytes])
+                .map_err(io_error(&data_path))?;
+            at += bytes;
+        }
+    } else {
+        // A stream: skip to each run and read it, in storage order.
+        let (mut reader, mut position) = if single {
+            (header_reader, HEADER_SIZE as u64)
+        } else {
+            (open(&data_path)?, 0)
+        };
+        let mut at = 0usize;
+        for (offset, count) in runs {
+            let start = layout.vox_offset + offset * size;
+            let skipped = skip(&mut *reader, start - position, &data_path)?;
+            if skipped < start - position {
+                return Err(truncated(position + skipped));
+            }
+            let bytes = (count * size) as usize;
+            let read = read_up_to(&mut *reader, bytes as u64, &data_path)?;
+            if read.len() < bytes {
+                return Err(truncated(start + read.len() as u64));
+            }
+            data[at..at + bytes].copy_from_slice(&read);
+            at += bytes;
+            position = start + bytes as u64;
+        }
+    }
+    Ok(Volume {
+        dims: local,
+        spacing: layout.spacing,
+        origin: layout.origin,
+        first: samples[0],
+        values: decode_scaled(&data, &header, &layout, endian),
+    })
+}
+
+/// The samples decoded and scaled by `scl_slope` and `scl_inter` (when the
+/// slope is finite and not 0).
+fn decode_scaled(data: &[u8], header: &Header, layout: &Layout, endian: Endian) -> Vec<f32> {
+    let (slope, inter) = (header.scl_slope as f64, header.scl_inter as f64);
+    if slope.is_finite() && slope != 0.0 {
+        let inter = if inter.is_finite() { inter } else { 0.0 };
+        decode(data, layout.datatype, endian, |v| {
+            (v * slope + inter) as f32
+        })
+    } else {
+        decode(data, layout.datatype, endian, |v| v as f32)
+    }
 }
 
 /// Where the first volume's samples are and what they are, checked.
@@ -534,7 +674,13 @@ fn header_for(volume: &Volume, path: &Path) -> Result<Header, VolumeError> {
         });
     }
     let mut header = Header::new(dims.map(|d| d as i16), Datatype::F32);
-    let (s, o) = (volume.spacing, volume.origin);
+    // A brick's origin is its first sample's position.
+    let o = if volume.first == UVec3::ZERO {
+        volume.origin
+    } else {
+        volume.position(0, 0, 0)
+    };
+    let s = volume.spacing;
     header.pixdim[1..4].copy_from_slice(&s.to_array());
     // Scanner-anatomical coordinates with the identity orientation, both ways.
     header.qform_code = 1;
@@ -982,6 +1128,7 @@ mod tests {
             dims: UVec3::new(5, 3, 2),
             spacing: Vec3::new(0.25, 1.5, 2.0),
             origin: Vec3::new(-1.0, 0.5, 8.0),
+            first: UVec3::ZERO,
             values: (0..30).map(|v| (v as f32 * 0.37).sin() * 1e3).collect(),
         };
         for name in ["v.nii", "v.nii.gz", "V.NII.GZ"] {
@@ -1005,5 +1152,45 @@ mod tests {
         let missing = dir.path().join("no/such/dir/v.nii");
         let error = volume.write_nifti(&missing).unwrap_err();
         assert!(error.to_string().contains("no/such/dir"), "{error}");
+    }
+
+    #[test]
+    fn a_box_read_is_the_same_sub_box_of_the_whole_read() {
+        use crate::volume::generate::{tests::sub_box, Dataset};
+        use crate::volume::kd_bricks;
+        let dir = tempfile::tempdir().unwrap();
+        let dims = UVec3::new(9, 7, 6);
+        let mut whole = Dataset::RichtmyerMeshkov.generate(dims).unwrap();
+        whole.origin = Vec3::new(-3.0, 0.25, 7.0);
+        for name in ["w.nii", "w.nii.gz"] {
+            let path = dir.path().join(name);
+            whole.write_nifti(&path).unwrap();
+            let read = Volume::load(&path, None).unwrap();
+            assert_eq!(Volume::read_dims(&path, None).unwrap(), dims);
+            for parts in 1..=5 {
+                for brick in kd_bricks(dims - UVec3::ONE, parts) {
+                    let part = Volume::load_brick(&path, None, &brick).unwrap();
+                    let expected = sub_box(&read, brick.samples[0], brick.samples[1]);
+                    assert_eq!(part, expected, "{name} {brick:?}");
+                }
+            }
+            let error = read_nifti_box(&path, [UVec3::ZERO, dims + UVec3::Z]).unwrap_err();
+            assert!(error.to_string().contains("not inside"), "{error}");
+        }
+        // Truncated data is an error, plain or gzipped.
+        let bytes = fs::read(dir.path().join("w.nii")).unwrap();
+        let short = write(&dir, "short.nii", &bytes[..bytes.len() - 4]);
+        let box_ = [UVec3::new(1, 1, 1), dims];
+        assert!(matches!(
+            read_nifti_box(&short, box_),
+            Err(VolumeError::Truncated { .. })
+        ));
+        let mut gz = GzEncoder::new(Vec::new(), Compression::fast());
+        gz.write_all(&bytes[..bytes.len() - 4]).unwrap();
+        let short = write(&dir, "short.nii.gz", &gz.finish().unwrap());
+        assert!(matches!(
+            read_nifti_box(&short, box_),
+            Err(VolumeError::Truncated { .. })
+        ));
     }
 }

@@ -159,6 +159,91 @@ impl FromStr for RawSpec {
 
 /// Reads a raw brick described by `spec` (see the module documentation).
 pub fn read_raw(path: &Path, spec: &RawSpec) -> Result<Volume, VolumeError> {
+    read_raw_box(path, spec, [UVec3::ZERO, spec.dims])
+}
+
+/// The dimensions of the raw brick `spec` describes, after the same checks
+/// as [`read_raw`] (the file's size among them), reading no samples.
+pub fn raw_dims(path: &Path, spec: &RawSpec) -> Result<UVec3, VolumeError> {
+    open_checked(path, spec)?;
+    Ok(spec.dims)
+}
+
+/// Reads only the samples `[samples[0], samples[1])` (global indices) of the
+/// raw brick `spec` describes: one `seek` and `read_exact` per contiguous run
+/// of the file (a row of the box, or several rows or slices where the box
+/// spans the whole grid along x, or x and y). The volume's `first` is
+/// `samples[0]`; the whole file's checks apply.
+pub fn read_raw_box(
+    path: &Path,
+    spec: &RawSpec,
+    samples: [UVec3; 2],
+) -> Result<Volume, VolumeError> {
+    let io_error = |source: io::Error| VolumeError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut file = open_checked(path, spec)?;
+    check_box(path, spec.dims, samples)?;
+    let size = spec.ty.size();
+    let local = samples[1] - samples[0];
+    let mut data = vec![0u8; (sample_count(local.as_u64vec3().to_array()) * size) as usize];
+    let mut at = 0usize;
+    for (offset, count) in box_runs(spec.dims, samples) {
+        let bytes = (count * size) as usize;
+        file.seek(SeekFrom::Start(spec.header_bytes + offset * size))
+            .map_err(io_error)?;
+        file.read_exact(&mut data[at..at + bytes])
+            .map_err(io_error)?;
+        at += bytes;
+    }
+    Ok(Volume {
+        dims: local,
+        spacing: spec.spacing,
+        origin: Vec3::ZERO,
+        first: samples[0],
+        values: decode(&data, spec.ty, spec.endian),
+    })
+}
+
+/// Fails unless `samples` is a non-empty box inside a `dims` grid.
+pub(crate) fn check_box(path: &Path, dims: UVec3, samples: [UVec3; 2]) -> Result<(), VolumeError> {
+    let [lo, hi] = samples;
+    if lo.cmpge(hi).any() || hi.cmpgt(dims).any() {
+        return Err(VolumeError::RawSize {
+            path: path.to_path_buf(),
+            what: format!(
+                "the box of samples [{lo}, {hi}) is empty or not inside the {}×{}×{} grid",
+                dims.x, dims.y, dims.z
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The contiguous runs of the box `[samples[0], samples[1])` of a `dims` grid
+/// stored x fastest, in storage order: `(first sample's index, samples)`.
+/// Rows that follow each other in the file are merged into one run.
+pub(crate) fn box_runs(dims: UVec3, samples: [UVec3; 2]) -> Vec<(u64, u64)> {
+    let [lo, hi] = samples.map(|s| s.as_u64vec3());
+    let (nx, ny) = (dims.x as u64, dims.y as u64);
+    let mut runs: Vec<(u64, u64)> = Vec::new();
+    for k in lo.z..hi.z {
+        for j in lo.y..hi.y {
+            let start = lo.x + nx * (j + ny * k);
+            let count = hi.x - lo.x;
+            match runs.last_mut() {
+                Some((first, length)) if *first + *length == start => *length += count,
+                _ => runs.push((start, count)),
+            }
+        }
+    }
+    runs
+}
+
+/// Opens the file after checking the spec and that the file's size is exactly
+/// what the spec says.
+fn open_checked(path: &Path, spec: &RawSpec) -> Result<File, VolumeError> {
     let io_error = |source: io::Error| VolumeError::Io {
         path: path.to_path_buf(),
         source,
@@ -188,12 +273,11 @@ pub fn read_raw(path: &Path, spec: &RawSpec) -> Result<Volume, VolumeError> {
             spec.spacing
         )));
     }
-    let mut file = File::open(path).map_err(io_error)?;
+    let file = File::open(path).map_err(io_error)?;
     let file_size = file.metadata().map_err(io_error)?.len();
     let data_bytes = spec.data_bytes();
     let needed = spec.header_bytes.saturating_add(data_bytes);
     let [x, y, z] = dims;
-    let size = spec.ty.size();
     let brick = format!(
         "{x}×{y}×{z} {} samples ({data_bytes} bytes)",
         spec.ty.name()
@@ -215,24 +299,16 @@ pub fn read_raw(path: &Path, spec: &RawSpec) -> Result<Volume, VolumeError> {
             file_size - data_bytes
         )));
     }
-    file.seek(SeekFrom::Start(spec.header_bytes))
-        .map_err(io_error)?;
-    let mut data = Vec::new();
-    file.take(data_bytes)
-        .read_to_end(&mut data)
-        .map_err(io_error)?;
-    if data.len() as u64 != data_bytes {
-        // The file shrank while being read.
-        return Err(size_error(format!(
-            "only {} of the {data_bytes} bytes of {brick} could be read",
-            data.len()
-        )));
-    }
-    let little = spec.endian == Endian::Little;
-    let values: Vec<f32> = match spec.ty {
+    Ok(file)
+}
+
+/// Samples of type `ty` in `endian` order, as f32.
+fn decode(data: &[u8], ty: RawType, endian: Endian) -> Vec<f32> {
+    let little = endian == Endian::Little;
+    match ty {
         RawType::U8 => data.iter().map(|&b| b as f32).collect(),
         RawType::U16 => data
-            .chunks_exact(size as usize)
+            .chunks_exact(ty.size() as usize)
             .map(|b| {
                 let b = [b[0], b[1]];
                 (if little {
@@ -243,7 +319,7 @@ pub fn read_raw(path: &Path, spec: &RawSpec) -> Result<Volume, VolumeError> {
             })
             .collect(),
         RawType::F32 => data
-            .chunks_exact(size as usize)
+            .chunks_exact(ty.size() as usize)
             .map(|b| {
                 let b = [b[0], b[1], b[2], b[3]];
                 if little {
@@ -253,13 +329,7 @@ pub fn read_raw(path: &Path, spec: &RawSpec) -> Result<Volume, VolumeError> {
                 }
             })
             .collect(),
-    };
-    Ok(Volume {
-        dims: spec.dims,
-        spacing: spec.spacing,
-        origin: Vec3::ZERO,
-        values,
-    })
+    }
 }
 
 #[cfg(test)]
@@ -385,5 +455,41 @@ mod tests {
             let error = bad.parse::<RawSpec>().unwrap_err();
             assert!(error.to_string().contains(bad), "{error}");
         }
+    }
+
+    #[test]
+    fn a_box_read_is_the_same_sub_box_of_the_whole_read() {
+        use crate::volume::generate::tests::sub_box;
+        use crate::volume::kd_bricks;
+        let dir = tempfile::tempdir().unwrap();
+        let dims = UVec3::new(7, 5, 6);
+        let values: Vec<u16> = (0..7 * 5 * 6).map(|v| v * 301 + 7).collect();
+        let mut bytes = b"HDR".to_vec();
+        bytes.extend(values.iter().flat_map(|v| v.to_be_bytes()));
+        let path = file(&dir, "box.raw", &bytes);
+        let spec = RawSpec::new(dims, RawType::U16)
+            .with_endian(Endian::Big)
+            .with_header_bytes(3)
+            .with_spacing(Vec3::new(0.5, 1.0, 2.0));
+        let whole = read_raw(&path, &spec).unwrap();
+        assert_eq!(Volume::read_dims(&path, Some(spec)).unwrap(), dims);
+        for parts in 1..=6 {
+            for brick in kd_bricks(dims - UVec3::ONE, parts) {
+                let part = Volume::load_brick(&path, Some(spec), &brick).unwrap();
+                assert_eq!(part, sub_box(&whole, brick.samples[0], brick.samples[1]));
+            }
+        }
+        // Runs merge where the box spans whole rows and slices.
+        assert_eq!(box_runs(dims, [UVec3::ZERO, dims]), [(0, 7 * 5 * 6)]);
+        assert_eq!(
+            box_runs(dims, [UVec3::new(0, 0, 2), UVec3::new(7, 5, 4)]),
+            [(70, 70)]
+        );
+        assert_eq!(
+            box_runs(dims, [UVec3::new(1, 3, 0), UVec3::new(3, 5, 1)]),
+            [(22, 2), (29, 2)]
+        );
+        assert!(read_raw_box(&path, &spec, [UVec3::ZERO, UVec3::new(8, 5, 6)]).is_err());
+        assert!(read_raw_box(&path, &spec, [UVec3::ONE, UVec3::ONE]).is_err());
     }
 }

@@ -320,12 +320,15 @@ struct Envs {
     /// mirror floor, a third of its triangles reflective, four lights (one
     /// below everything), a 48×32 camera at an angle.
     curved: Env,
-    /// A distance field on an anisotropic, offset grid, cut by its border.
+    /// A distance field on an anisotropic, offset grid, cut by its border; a
+    /// brick (`first` not zero).
     sphere: Env,
     /// Small integers (levels hit samples exactly), a NaN and an infinity.
     integers: Env,
     /// Two samples thick: every cell on the border.
     thin: Env,
+    /// The fixture's squares as a part of a larger data set: a global id table.
+    part: Env,
 }
 
 fn envs() -> Envs {
@@ -340,17 +343,25 @@ fn envs() -> Envs {
     .unwrap();
     Envs {
         simple: Env::trace("simple", Fixture::new(), None),
+        part: {
+            let scene = (*Fixture::new().resources.scene).clone();
+            let ids = Arc::new(vec![4_000_000_000, 17, 0, 123_456]);
+            let scene = scene.with_global_ids(ids).unwrap();
+            Env::trace("part", Fixture::with_scene(scene), None)
+        },
         wide: Env::trace("wide", Fixture::new(), Some(wide_camera)),
         curved: curved_env(),
-        sphere: Env::volume(
-            "sphere",
-            Volume::from_fn(
+        sphere: Env::volume("sphere", {
+            let mut v = Volume::from_fn(
                 UVec3::new(9, 8, 7),
                 Vec3::new(-1.1, 0.3, 2.0),
                 Vec3::new(0.25, 0.3, 0.35),
                 |p, _| (p - Vec3::new(-0.2, 1.3, 3.2)).length(),
-            ),
-        ),
+            );
+            // A brick of a larger volume: positions from global indices.
+            v.first = UVec3::new(3, 1, 2);
+            v
+        }),
         integers: Env::volume("integers", {
             let mut v = Volume::from_fn(UVec3::new(7, 6, 5), Vec3::ZERO, Vec3::ONE, |_, s| {
                 ((s.x * 7 + s.y * 3 + s.z * 5) % 11) as f32
@@ -1144,6 +1155,34 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
             )
         })
         .collect();
+    let prims = Column::U32(
+        (0..200u32)
+            .map(|i| match i % 5 {
+                4 => crate::MISS_PRIM,
+                _ => i % 4,
+            })
+            .collect(),
+    );
+    for env in [simple, &envs.part] {
+        cases.push(agree(
+            env,
+            "globalId",
+            "every triangle and misses",
+            &[&prims],
+            &[],
+            1,
+            INTEGERS,
+        ));
+    }
+    cases.push(fails(
+        &envs.part,
+        "globalId",
+        "a triangle past the table",
+        &[&Column::U32(vec![0, 4])],
+        &[],
+        1,
+        "triangle",
+    ));
     cases.push(agree(
         simple,
         "alive",

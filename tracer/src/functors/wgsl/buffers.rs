@@ -10,13 +10,14 @@
 //! | `tracer_bvh_triangle_ids` | `array<u32>` | [`Bvh::triangle_ids`]: file-order id per leaf-order triangle |
 //! | `tracer_mesh_triangles` | `array<vec4<u32>>` | per file-order triangle: vertex indices, material id |
 //! | `tracer_mesh_vertices` | `array<vec4<f32>>` | 2 per vertex: `(position, scalar)`, `(normal, 0)` |
+//! | `tracer_global_ids` | `array<u32>` | 1 with a global id table (0 without), then each triangle's id in the whole data set ([`crate::TraceScene::global_id_gpu_buffer`]) |
 //! | `tracer_shading_constants` | `array<vec4<f32>>` | `(min, max, 1 / (max - min), 0)` of the scalar range, `(background, 0)` (linear) |
 //! | `tracer_colormap` | `array<vec4<f32>>` | 256 linear colours `(r, g, b, 0)` |
 //! | `tracer_materials` | `array<vec4<f32>>` | 2 per material: `(Kd, Ns)`, `(Ks, reflectivity)` |
 //! | `tracer_lights` | `array<vec4<f32>>` | 2 per light: `(position, intensity)`, `(colour, 0)` |
 //! | `tracer_camera` | `array<vec4<f32>>` | `(eye, tan(fov/2))`, `(forward, aspect)`, `(right, width)`, `(true up, height)` |
 //! | `tracer_camera_morton_pixels` | `array<u32>` | [`CameraSetup::morton_pixels`] |
-//! | `tracer_volume_grid` | `array<vec4<u32>>` | `(dims, cell count)`, bits of `(origin, 0)`, bits of `(spacing, 0)` |
+//! | `tracer_volume_grid` | `array<vec4<u32>>` | `(dims, cell count)`, bits of `(origin, 0)`, bits of `(spacing, 0)`, `(first, 0)` |
 //! | `tracer_volume_values` | `array<f32>` | the samples, x fastest |
 //! | `tracer_mc_case_triangle_counts` | `array<u32>` | 256 triangle counts |
 //! | `tracer_mc_case_triangles` | `array<u32>` | 5 per case: `e0 \| e1 << 8 \| e2 << 16` |
@@ -262,6 +263,7 @@ impl VolumeGpuBuffers {
         let mut grid = vec![dims.x, dims.y, dims.z, cells];
         grid.extend(vec4_words(volume.origin, 0.0));
         grid.extend(vec4_words(volume.spacing, 0.0));
+        grid.extend([volume.first.x, volume.first.y, volume.first.z, 0]);
         let values = volume.values.iter().map(|v| v.to_bits()).collect();
         Ok(VolumeGpuBuffers {
             grid: buffer("tracer_volume_grid", "array<vec4<u32>>", grid),

@@ -33,7 +33,7 @@ enum Reads {
     Nothing,
 }
 
-const TWINS: [(&str, Reads); 15] = [
+const TWINS: [(&str, Reads); 16] = [
     ("cameraRay", Reads::Scene),
     ("intersect", Reads::Scene),
     ("occluded", Reads::Scene),
@@ -46,6 +46,7 @@ const TWINS: [(&str, Reads); 15] = [
     ("reflect", Reads::Scene),
     ("alive", Reads::Nothing),
     ("antiAlias", Reads::Nothing),
+    ("globalId", Reads::Scene),
     ("cubeCase", Reads::Volume),
     ("caseTriangles", Reads::Nothing),
     ("cubeTriangle", Reads::Volume),
@@ -177,7 +178,7 @@ fn all_twins_compile_together_in_one_shader() {
     names.sort_unstable();
     names.dedup();
     assert_eq!(names.len(), buffers.len(), "one buffer per name");
-    assert_eq!(buffers.len(), 16, "{names:?}");
+    assert_eq!(buffers.len(), 17, "{names:?}");
 }
 
 #[test]
@@ -370,6 +371,18 @@ fn volume_and_table_buffers_hold_the_cpu_data() {
     assert_eq!(grid[0..4], [5, 6, 7, 4 * 5 * 6]);
     assert_eq!(floats(&grid[4..7]), volume.origin.to_array());
     assert_eq!(floats(&grid[8..11]), volume.spacing.to_array());
+    assert_eq!(grid[12..16], [0, 0, 0, 0], "first");
+    let brick = crate::volume::generate::Dataset::Sphere
+        .generate_box(
+            UVec3::new(9, 9, 9),
+            [UVec3::new(2, 3, 4), UVec3::new(6, 9, 8)],
+        )
+        .unwrap();
+    let brick_grid = super::buffers::VolumeGpuBuffers::new(&brick)
+        .unwrap()
+        .grid
+        .data;
+    assert_eq!(brick_grid[12..16], [2, 3, 4, 0], "first");
     assert_eq!(floats(&buffers.values.data), volume.values);
     let mut bad = (**volume).clone();
     bad.values.pop();

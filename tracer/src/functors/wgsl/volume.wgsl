@@ -3,8 +3,9 @@
 // tracer/src/functors/isosurface/mod.rs).
 //
 // Buffers (tracer/src/functors/wgsl/buffers.rs):
-// - tracer_volume_grid: array<vec4<u32>>, 3 entries: (dims.xyz, cell count),
-//   (bits of origin.xyz, 0), (bits of spacing.xyz, 0);
+// - tracer_volume_grid: array<vec4<u32>>, 4 entries: (dims.xyz, cell count),
+//   (bits of origin.xyz, 0), (bits of spacing.xyz, 0), (first.xyz, 0) (the
+//   global index of sample (0, 0, 0): zero for a whole volume);
 // - tracer_volume_values: array<f32>, sample (i, j, k) at i + dims.x * (j + dims.y * k).
 
 fn tracer_volume_dims() -> vec3<u32> {
@@ -20,11 +21,13 @@ fn tracer_volume_value(sample: vec3<u32>) -> f32 {
     return tracer_volume_values[sample.x + dims.x * (sample.y + dims.y * sample.z)];
 }
 
-// `Volume::position`: `origin + spacing * (i, j, k)`.
+// `Volume::position`: `origin + spacing * (first + (i, j, k))`, the global
+// index converted to f32 once.
 fn tracer_volume_position(sample: vec3<u32>) -> vec3<f32> {
     let origin = bitcast<vec3<f32>>(tracer_volume_grid[1].xyz);
     let spacing = bitcast<vec3<f32>>(tracer_volume_grid[2].xyz);
-    return origin + spacing * vec3<f32>(sample);
+    let first = tracer_volume_grid[3].xyz;
+    return origin + spacing * vec3<f32>(first + sample);
 }
 
 // `Volume::gradient`: central differences inside, one-sided on the border,
