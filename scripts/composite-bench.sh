@@ -47,7 +47,7 @@ for n in $ranks_list; do
         # shared-memory transport uses for large messages: plain copies.
         if ! timeout --kill-after=10 "$limit" mpirun --oversubscribe \
             --mca btl_vader_single_copy_mechanism none -n "$n" \
-            "$bench" --sizes "$size" --schedules "$schedules" --repeats "$repeats" \
+            "$bench" --sizes "$size" --schedules "$schedules" --repeats "$repeats" --cores "$cores" \
             >>"$out"; then
             echo "composite-bench: FAILED: $n ranks, $size (124: timed out after ${limit}s)" >&2
             failed=1

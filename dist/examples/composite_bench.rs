@@ -4,8 +4,11 @@
 //! mpirun -n N target/release/examples/composite_bench \
 //!     [--sizes 512x512,1920x1080,3840x2160] \
 //!     [--schedules direct,binary-swap,radix-k:2,radix-k:4,radix-k:8] \
-//!     [--repeats R] [--check-max-pixels P] [--seed S]
+//!     [--repeats R] [--check-max-pixels P] [--seed S] [--cores C]
 //! ```
+//!
+//! `--cores`: the machine's cores, for the `oversubscribed` field (a rank
+//! bound to one core by mpirun sees only that one).
 //!
 //! Every rank makes the fragments the tracer hands over — depth `f32`, alpha
 //! `f32`, colour `vec3` (20 bytes per pixel) — with random depths from a
@@ -39,13 +42,16 @@ struct Args {
     repeats: usize,
     check_max_pixels: usize,
     seed: u64,
+    /// The machine's cores (mpirun binds a rank to one core when ranks ≤
+    /// cores, so a rank cannot count them itself).
+    cores: Option<usize>,
 }
 
 fn usage(message: &str) -> ! {
     eprintln!("composite_bench: {message}");
     eprintln!(
         "usage: composite_bench [--sizes WxH,...] [--schedules direct,binary-swap,radix-k:K,...] \
-         [--repeats R] [--check-max-pixels P] [--seed S]"
+         [--repeats R] [--check-max-pixels P] [--seed S] [--cores C]"
     );
     std::process::exit(2)
 }
@@ -53,13 +59,20 @@ fn usage(message: &str) -> ! {
 fn parse_args() -> Args {
     let mut args = Args {
         sizes: vec![(512, 512), (1920, 1080), (3840, 2160)],
-        schedules: ["direct", "binary-swap", "radix-k:2", "radix-k:4", "radix-k:8"]
-            .iter()
-            .map(|s| s.parse().unwrap())
-            .collect(),
+        schedules: [
+            "direct",
+            "binary-swap",
+            "radix-k:2",
+            "radix-k:4",
+            "radix-k:8",
+        ]
+        .iter()
+        .map(|s| s.parse().unwrap())
+        .collect(),
         repeats: 5,
         check_max_pixels: 2_100_000,
         seed: 2009,
+        cores: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -91,6 +104,7 @@ fn parse_args() -> Args {
             "--repeats" => args.repeats = number(&value).max(1) as usize,
             "--check-max-pixels" => args.check_max_pixels = number(&value) as usize,
             "--seed" => args.seed = number(&value),
+            "--cores" => args.cores = Some(number(&value) as usize),
             _ => usage(&format!("unknown flag {flag}")),
         }
     }
@@ -204,7 +218,9 @@ fn main() {
     let args = parse_args();
     let ranks = Ranks::init().unwrap_or_else(|e| usage(&e.to_string()));
     let (p, me) = (ranks.size(), ranks.rank());
-    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+    let cores = args
+        .cores
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |c| c.get()));
     let records = RecordRegistry::default();
     let order: Vec<usize> = (0..p).collect();
 
@@ -219,14 +235,8 @@ fn main() {
             for repeat in 0..=args.repeats {
                 ranks.barrier();
                 let started = Instant::now();
-                let result = composite(
-                    &ranks,
-                    schedule,
-                    mine.clone(),
-                    &order,
-                    &records,
-                    &mut blend,
-                );
+                let result =
+                    composite(&ranks, schedule, mine.clone(), &order, &records, &mut blend);
                 let total = started.elapsed().as_secs_f64();
                 let out = ranks.agree(result).unwrap_or_else(|e| {
                     eprintln!("rank {me}: {schedule} on {width}x{height}: {}", e.message);
