@@ -398,11 +398,11 @@ pub fn fit_nonnegative(rows: &[Vec<f64>], times: &[f64]) -> Option<Vec<f64>> {
         let x = |r: &Vec<f64>, a: usize| r[terms[a]] / norms[terms[a]];
         let mut a = vec![vec![0.0; m + 1]; m];
         for (r, t) in rows.iter().zip(times) {
-            for i in 0..m {
-                for j in 0..m {
-                    a[i][j] += x(r, i) * x(r, j);
+            for (i, line) in a.iter_mut().enumerate() {
+                for (j, cell) in line.iter_mut().take(m).enumerate() {
+                    *cell += x(r, i) * x(r, j);
                 }
-                a[i][m] += x(r, i) * t;
+                line[m] += x(r, i) * t;
             }
         }
         let mut solvable = true;
@@ -415,11 +415,12 @@ pub fn fit_nonnegative(rows: &[Vec<f64>], times: &[f64]) -> Option<Vec<f64>> {
                 break;
             }
             a.swap(col, pivot);
-            for row in 0..m {
+            let pivot_line = a[col].clone();
+            for (row, line) in a.iter_mut().enumerate() {
                 if row != col {
-                    let f = a[row][col] / a[col][col];
-                    for j in col..=m {
-                        a[row][j] -= f * a[col][j];
+                    let f = line[col] / pivot_line[col];
+                    for (cell, p) in line.iter_mut().zip(&pivot_line).skip(col) {
+                        *cell -= f * p;
                     }
                 }
             }
@@ -713,7 +714,8 @@ mod tests {
         }
         // Times that fall with the first term: its coefficient is 0, not < 0.
         let rows = vec![vec![1.0, 1.0], vec![2.0, 3.0], vec![3.0, 7.0]];
-        let fit = fit_nonnegative(&rows, &[1.0, 2.5, 6.0]).unwrap();
+        // Exactly −1·x0 + 2·x1: unconstrained, the first term would be negative.
+        let fit = fit_nonnegative(&rows, &[1.0, 4.0, 11.0]).unwrap();
         assert_eq!(fit[0], 0.0);
         assert!(fit[1] > 0.0);
         assert_eq!(fit_nonnegative(&[], &[]), None);
