@@ -360,6 +360,88 @@ impl Plan {
     }
 }
 
+/// Non-negative least squares for a handful of terms: the coefficients
+/// `c ≥ 0` minimising `Σ_i (rows[i] · c − times[i])²`. It exists for the
+/// compositing benchmark, which fits latency, bandwidth and blend terms
+/// (α per message, β per byte, γ per blended pixel) of [`cost`] to measured
+/// times, where a negative α or β would be meaningless. Exact for few terms:
+/// the optimum is the unconstrained least squares over its non-zero terms,
+/// so it tries every subset of the terms (2^k solves; `k` ≤ 10) and keeps
+/// the best one whose coefficients are all non-negative. Columns are scaled
+/// to unit norm first (messages count in ones, bytes in billions). `None`
+/// when there are no rows or rows of different lengths.
+pub fn fit_nonnegative(rows: &[Vec<f64>], times: &[f64]) -> Option<Vec<f64>> {
+    let k = rows.first()?.len();
+    if rows.len() != times.len() || rows.iter().any(|r| r.len() != k) || k > 10 {
+        return None;
+    }
+    let norms: Vec<f64> = (0..k)
+        .map(|j| rows.iter().map(|r| r[j] * r[j]).sum::<f64>().sqrt())
+        .collect();
+    let residual = |c: &[f64]| -> f64 {
+        rows.iter()
+            .zip(times)
+            .map(|(r, t)| (r.iter().zip(c).map(|(x, c)| x * c).sum::<f64>() - t).powi(2))
+            .sum()
+    };
+    let mut best = (residual(&vec![0.0; k]), vec![0.0; k]);
+    for mask in 1u32..(1 << k) {
+        let terms: Vec<usize> = (0..k)
+            .filter(|j| mask & (1 << j) != 0 && norms[*j] > 0.0)
+            .collect();
+        if terms.len() != mask.count_ones() as usize {
+            continue;
+        }
+        // Normal equations over the scaled columns, Gaussian elimination
+        // with partial pivoting.
+        let m = terms.len();
+        let x = |r: &Vec<f64>, a: usize| r[terms[a]] / norms[terms[a]];
+        let mut a = vec![vec![0.0; m + 1]; m];
+        for (r, t) in rows.iter().zip(times) {
+            for (i, line) in a.iter_mut().enumerate() {
+                for (j, cell) in line.iter_mut().take(m).enumerate() {
+                    *cell += x(r, i) * x(r, j);
+                }
+                line[m] += x(r, i) * t;
+            }
+        }
+        let mut solvable = true;
+        for col in 0..m {
+            let pivot = (col..m)
+                .max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))
+                .unwrap();
+            if a[pivot][col].abs() < 1e-12 {
+                solvable = false;
+                break;
+            }
+            a.swap(col, pivot);
+            let pivot_line = a[col].clone();
+            for (row, line) in a.iter_mut().enumerate() {
+                if row != col {
+                    let f = line[col] / pivot_line[col];
+                    for (cell, p) in line.iter_mut().zip(&pivot_line).skip(col) {
+                        *cell -= f * p;
+                    }
+                }
+            }
+        }
+        if !solvable {
+            continue;
+        }
+        let mut c = vec![0.0; k];
+        for (i, &j) in terms.iter().enumerate() {
+            c[j] = a[i][m] / a[i][i] / norms[j];
+        }
+        if c.iter().all(|v| *v >= 0.0) {
+            let r = residual(&c);
+            if r < best.0 {
+                best = (r, c);
+            }
+        }
+    }
+    Some(best.1)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -602,5 +684,40 @@ mod tests {
             }
         }
         assert_eq!(a.owned.iter().filter(|r| !r.is_empty()).count(), 5);
+    }
+
+    #[test]
+    fn the_fit_recovers_known_terms_and_never_goes_negative() {
+        // t = 2e-5 per message + 1e-9 per byte + 3e-9 per pixel, exactly.
+        let schedules = [
+            CompositeSchedule::DirectSend,
+            CompositeSchedule::BinarySwap,
+            CompositeSchedule::RadixK(4),
+        ];
+        let mut rows = Vec::new();
+        let mut times = Vec::new();
+        for schedule in &schedules {
+            for p in 2..9 {
+                for n in [1000, 250_000, 2_000_000] {
+                    let c = cost(schedule, p, n, 20);
+                    let messages = (c.messages_per_rank + c.gather_messages) as f64;
+                    let bytes = c.bytes_per_rank + c.gather_bytes;
+                    let pixels = c.bytes_per_rank / 20.0;
+                    rows.push(vec![messages, bytes, pixels]);
+                    times.push(2e-5 * messages + 1e-9 * bytes + 3e-9 * pixels);
+                }
+            }
+        }
+        let fit = fit_nonnegative(&rows, &times).unwrap();
+        for (got, want) in fit.iter().zip([2e-5, 1e-9, 3e-9]) {
+            assert!((got - want).abs() <= 1e-6 * want, "{fit:?}");
+        }
+        // Times that fall with the first term: its coefficient is 0, not < 0.
+        let rows = vec![vec![1.0, 1.0], vec![2.0, 3.0], vec![3.0, 7.0]];
+        // Exactly −1·x0 + 2·x1: unconstrained, the first term would be negative.
+        let fit = fit_nonnegative(&rows, &[1.0, 4.0, 11.0]).unwrap();
+        assert_eq!(fit[0], 0.0);
+        assert!(fit[1] > 0.0);
+        assert_eq!(fit_nonnegative(&[], &[]), None);
     }
 }
