@@ -7,6 +7,7 @@
 mod console;
 mod bench;
 mod colorbar;
+mod distributed;
 mod outputs;
 mod progress;
 mod scene_setup;
@@ -17,7 +18,9 @@ use dpp_gpu::{run_plan_gpu_observed, GpuContext, GpuRunContext};
 use dpp_runtime::compile::plan_text::plan_to_text;
 use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan_observed, RunContext};
-use dpp_runtime::interpret::{listed_op_shares, OutputValue, RunError, StageStart, StageTiming};
+use dpp_runtime::interpret::{
+    listed_op_shares, OutputValue, RunError, RunHooks, StageStart, StageTiming,
+};
 use dpp_runtime::{compile_file, CompileOptions, FunctorLibrary, Plan};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -111,8 +114,12 @@ impl CompileArgs {
 #[derive(clap::Args)]
 struct RunArgs {
     pipeline: PathBuf,
-    /// An OBJ file; without it, the built-in procedural isosurface.
-    scene: Option<PathBuf>,
+    /// The scene: a mesh (.obj, .ply, gzipped too), a volume (.nii, .nii.gz, a
+    /// raw brick with --raw), a generated volume (`rm:X,Y,Z`, `pbte:X,Y,Z`,
+    /// `sphere:X,Y,Z`) or `builtin[:RESOLUTION]` (the default); several mesh
+    /// files are the pieces of one scene (dealt out to ranks under mpirun).
+    #[arg(value_name = "SCENE")]
+    scenes: Vec<String>,
     /// Where the `image` output goes (PNG). Default: `<pipeline name>.png`.
     #[arg(short, long, value_name = "FILE.png")]
     output: Option<PathBuf>,
@@ -170,6 +177,14 @@ struct RunArgs {
     threads: Option<usize>,
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     backend: Backend,
+    /// Under mpirun: each rank holds part of the data (`data`, the default) or
+    /// renders part of the image with all of the data (`image`).
+    #[arg(long, value_enum, default_value_t = distributed::Decompose::Data)]
+    decompose: distributed::Decompose,
+    /// Under mpirun with data decomposition: how the ranks composite their
+    /// images: `direct`, `binary-swap`, `radix-k` or `radix-k:K`.
+    #[arg(long, default_value = "radix-k", value_name = "SCHEDULE")]
+    composite: dpp_dist::CompositeSchedule,
     /// Print the time spent in each stage.
     #[arg(long, short = 'v', visible_alias = "verbose")]
     profile: bool,
@@ -406,14 +421,36 @@ impl RunScene {
 }
 
 fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
-    let plan = compile(&args.pipeline, library, &args.compile.options())?;
-    let pool = thread_pool(args.threads)?;
+    // Under mpirun every rank runs this; a failure before the run is agreed
+    // by every rank, so that all of them exit with the same error.
+    let distribution =
+        distributed::Distribution::init(args.decompose, args.composite.clone()).map_err(Failure::Run)?;
+    distribution.check_same_command_line().map_err(Failure::Input)?;
+    let compiled = compile(&args.pipeline, library, &args.compile.options());
+    let plan = agree_failure(&distribution, compiled)?;
+    let pool = agree_failure(&distribution, thread_pool(args.threads))?;
 
-    let progress = progress::Progress::on_terminal(args.quiet);
+    let is_root = distribution.rank() == 0;
+    let progress = progress::Progress::on_terminal(args.quiet || !is_root);
     let setup_start = Instant::now();
-    let scene = run_scene(&args, &plan, library, &progress)?;
+    let scene = run_scene(&args, &plan, library, &progress, &distribution)?;
     let setup_time = setup_start.elapsed();
     let observe = |stage: &StageStart<'_>| progress.stage(stage);
+    let visibility_order = match &scene {
+        RunScene::Traced(setup) if distribution.splits_data() => {
+            let mine = setup.resources.scene.mesh.bounds().unwrap_or(setup.resources.scene.bounds);
+            distributed::visibility_order(&distribution.every_rank_bounds(mine), setup.camera.eye)
+        }
+        _ => (0..distribution.size()).collect(),
+    };
+    let width = scene.camera().map_or(0, |camera| camera.width);
+    let compositor = distribution.compositor(&library.records, width, visibility_order);
+    let hooks = RunHooks {
+        observer: Some(&observe),
+        compositor: compositor
+            .as_ref()
+            .map(|c| c as &dyn dpp_runtime::interpret::Compositor),
+    };
 
     let mut description = scene.description().to_string();
     let (result, run_time) = match args.backend {
@@ -427,10 +464,8 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             };
             progress.phase(format!("running {}", plan.pipeline));
             let run_start = Instant::now();
-            let result = pool
-                .install(|| run_plan_observed(&plan, &context, Some(&observe)))
-                .map_err(Failure::from)?;
-            (result, run_start.elapsed())
+            let result = pool.install(|| run_plan_observed(&plan, &context, hooks));
+            (ended(&distribution, result)?, run_start.elapsed())
         }
         Backend::Gpu => {
             progress.phase("opening the GPU");
@@ -445,13 +480,26 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             };
             progress.phase(format!("running {} on the GPU", plan.pipeline));
             let run_start = Instant::now();
-            let result = pool
-                .install(|| run_plan_gpu_observed(&plan, &context, Some(&observe)))
-                .map_err(Failure::from)?;
-            (result, run_start.elapsed())
+            let result = pool.install(|| run_plan_gpu_observed(&plan, &context, hooks));
+            (ended(&distribution, result)?, run_start.elapsed())
         }
     };
 
+    if distribution.size() > 1 && args.profile {
+        let triangles = match &scene {
+            RunScene::Traced(setup) => setup.resources.scene.mesh.triangles.len(),
+            RunScene::Volume(_) => 0,
+        };
+        let stats = compositor.as_ref().and_then(|c| c.stats());
+        let table = distributed::rank_report(&distribution, triangles, run_time, stats.as_ref());
+        if !table.is_empty() {
+            err!("{}\n", table.join("\n"));
+        }
+    }
+    // Rank 0 holds the composited image and writes the outputs.
+    if result.composited_elsewhere || !is_root {
+        return Ok(());
+    }
     let mut requests = args.outs.clone();
     let has_image = plan.outputs.iter().any(|o| o == "image");
     match (&args.output, has_image) {
@@ -496,6 +544,40 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     Ok(())
 }
 
+/// A failure before the run, agreed by every rank (the ranks that did not
+/// fail learn of it instead of waiting for the failing one).
+fn agree_failure<T>(
+    distribution: &distributed::Distribution,
+    result: Result<T, Failure>,
+) -> Result<T, Failure> {
+    if distribution.size() == 1 {
+        return result;
+    }
+    let (result, input) = match result {
+        Ok(value) => (Ok(value), true),
+        Err(Failure::Input(message)) => (Err(message), true),
+        Err(Failure::Run(message)) => (Err(message), false),
+    };
+    distribution.agree(result).map_err(|message| match input {
+        true => Failure::Input(message),
+        false => Failure::Run(message),
+    })
+}
+
+/// The end of a rank's run: a failure in the middle of a distributed run
+/// ends every rank (the others may be waiting for this one to composite).
+fn ended(
+    distribution: &distributed::Distribution,
+    result: Result<dpp_runtime::interpret::RunResult, RunError>,
+) -> Result<dpp_runtime::interpret::RunResult, Failure> {
+    match result {
+        Err(error) if distribution.size() > 1 => {
+            distributed::abort_on_failure(distribution, error.kind, &error.message)
+        }
+        other => other.map_err(Failure::from),
+    }
+}
+
 /// The scene `plan` runs on, once it is sure to provide every uniform the
 /// plan reads: a pipeline that reads `volume.*` runs on a volume given as
 /// the scene, any other on a traced scene. A uniform the scene cannot provide
@@ -505,6 +587,7 @@ fn run_scene(
     plan: &Plan,
     library: &FunctorLibrary,
     progress: &progress::Progress,
+    distribution: &distributed::Distribution,
 ) -> Result<RunScene, Failure> {
     let pipeline = args.pipeline.display();
     let reads = plan.uniforms_read();
@@ -516,11 +599,15 @@ fn run_scene(
             .collect()
     };
     let volume_reads = named("volume");
+    let scenes = (args.scenes.iter())
+        .map(|text| scene_setup::SceneSpec::parse(text))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(Failure::Input)?;
     let scene = if volume_reads.is_empty() {
         let shading = shading_overrides(args).map_err(Failure::Input)?;
         let setup = scene_setup::SceneSetup::new(
             &scene_setup::SceneRequest {
-                scene: args.scene.clone(),
+                scenes,
                 size: args.size,
                 view: args.view.clone(),
                 eye: args.eye,
@@ -537,6 +624,7 @@ fn run_scene(
             },
             library,
             progress,
+            distribution,
         )
         .map_err(Failure::Input)?;
         RunScene::Traced(Box::new(setup))
@@ -549,12 +637,17 @@ fn run_scene(
                 traced.join(", ")
             )));
         }
-        let volume = match &args.scene {
-            Some(path) if volume_setup::is_volume_path(path) || args.raw.is_some() => path,
+        let volume = match &scenes[..] {
+            [scene_setup::SceneSpec::File(path)]
+                if volume_setup::is_volume_path(path) || args.raw.is_some() =>
+            {
+                path
+            }
             given => {
                 let given = match given {
-                    Some(path) => format!("; `{}` is a mesh", path.display()),
-                    None => String::new(),
+                    [] => String::new(),
+                    [one] => format!("; `{}` is not a volume file", one.name()),
+                    _ => "; several scenes were given".to_string(),
                 };
                 return Err(Failure::Input(format!(
                     "error: {pipeline} reads {}: pass a volume to run it on (a .nii or .nii.gz file, or a raw brick with --raw XxYxZ:TYPE){given}",

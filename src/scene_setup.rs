@@ -2,11 +2,14 @@
 //! isosurface of a volume, or the built-in scene; BVH built once, outside any
 //! frame), the camera, the shading and the uniforms.
 
+use crate::distributed::{self, Distribution};
 use crate::progress::Progress;
 use crate::volume_setup::{self, IsoRequest};
 use dpp_runtime::{FunctorLibrary, Uniforms};
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
+use dpp_tracer::volume::generate::Dataset;
 use dpp_tracer::shading::MeshMaterials;
+use dpp_tracer::camera::tile_owner;
 use dpp_tracer::{
     Camera, CameraSetup, SceneFile, ShadingOverrides, StandardView, TraceResources, TraceScene,
     TriangleMesh,
@@ -15,8 +18,95 @@ use glam::Vec3;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+/// A scene as the command line names it (`dpp run` and `dpp bench` alike).
+#[derive(Clone, Debug, PartialEq)]
+pub enum SceneSpec {
+    /// `builtin`, `builtin:RESOLUTION`: the built-in mixing layer.
+    Builtin(u32),
+    /// `rm:X,Y,Z`, `pbte:X,Y,Z`, `sphere:X,Y,Z` (or one size for all three):
+    /// one of the paper's data sets generated on that grid, as a volume.
+    Generated(Dataset, [u32; 3]),
+    /// A mesh or volume file.
+    File(PathBuf),
+}
+
+impl SceneSpec {
+    pub fn parse(text: &str) -> Result<SceneSpec, String> {
+        if text == "builtin" {
+            return Ok(SceneSpec::Builtin(DEFAULT_RESOLUTION));
+        }
+        if let Some(resolution) = text.strip_prefix("builtin:") {
+            let resolution: u32 = resolution.parse().map_err(|_| {
+                format!("error: `{text}`: the built-in scene's resolution is a whole number (like builtin:224)")
+            })?;
+            let range = dpp_tracer::builtin_scene::MIN_RESOLUTION
+                ..=dpp_tracer::builtin_scene::MAX_RESOLUTION;
+            if !range.contains(&resolution) {
+                return Err(format!(
+                    "error: `{text}`: the built-in scene's resolution must be in {}..={}",
+                    range.start(),
+                    range.end()
+                ));
+            }
+            return Ok(SceneSpec::Builtin(resolution));
+        }
+        let path = PathBuf::from(text);
+        if let Some((name, grid)) = text.split_once(':').filter(|_| !path.exists()) {
+            if let Ok(dataset) = Dataset::from_name(name) {
+                let grid = match crate::parse_grid(grid) {
+                    Ok(grid) => grid,
+                    Err(_) => match grid.parse::<u32>() {
+                        Ok(n) => [n; 3],
+                        Err(_) => {
+                            return Err(format!(
+                                "error: `{text}`: give the volume's grid as {name}:X,Y,Z (like {name}:128,128,128)"
+                            ))
+                        }
+                    },
+                };
+                if grid.iter().any(|&n| !(4..=1024).contains(&n)) {
+                    return Err(format!(
+                        "error: `{text}`: each grid size must be in 4..=1024"
+                    ));
+                }
+                return Ok(SceneSpec::Generated(dataset, grid));
+            }
+        }
+        if !path.is_file() {
+            return Err(format!(
+                "error: scene `{text}` is not a file (nor builtin, builtin:RESOLUTION, or a generated volume rm:X,Y,Z, pbte:X,Y,Z, sphere:X,Y,Z)"
+            ));
+        }
+        Ok(SceneSpec::File(path))
+    }
+
+    pub fn name(&self) -> String {
+        match self {
+            SceneSpec::Builtin(resolution) => format!("builtin:{resolution}"),
+            SceneSpec::Generated(dataset, [x, y, z]) => {
+                format!("{}:{x},{y},{z}", dataset_name(*dataset))
+            }
+            SceneSpec::File(path) => path.file_name().map_or_else(
+                || path.display().to_string(),
+                |n| n.to_string_lossy().into(),
+            ),
+        }
+    }
+
+    /// Whether the scene is a volume, made a mesh by an isosurface.
+    pub fn is_volume(&self, raw: Option<&str>) -> bool {
+        match self {
+            SceneSpec::Builtin(_) => false,
+            SceneSpec::Generated(..) => true,
+            SceneSpec::File(path) => volume_setup::is_volume_path(path) || raw.is_some(),
+        }
+    }
+}
+
 pub struct SceneRequest {
-    pub scene: Option<PathBuf>,
+    /// The scene, or its pieces (mesh files, loaded together in one process
+    /// and dealt out to ranks in a distributed run); empty: the built-in one.
+    pub scenes: Vec<SceneSpec>,
     pub size: (u32, u32),
     pub view: String,
     pub eye: Option<[f32; 3]>,
@@ -35,6 +125,16 @@ pub struct SceneRequest {
     pub fuse: bool,
 }
 
+/// What a rank's share of a distributed run changes in its set-up.
+#[derive(Clone, Debug, Default)]
+pub struct RankShare {
+    /// The colour map's range over the whole data, agreed by the ranks
+    /// (before a scene file or `--scalar-range` replaces it).
+    pub scalar_range: Option<[f32; 2]>,
+    /// Image decomposition: `(rank, ranks)`, tracing only this rank's tiles.
+    pub traced_tiles: Option<(usize, usize)>,
+}
+
 pub struct SceneSetup {
     pub uniforms: Uniforms,
     pub resources: TraceResources,
@@ -50,17 +150,45 @@ impl SceneSetup {
         request: &SceneRequest,
         library: &FunctorLibrary,
         progress: &Progress,
+        distribution: &Distribution,
     ) -> Result<SceneSetup, String> {
-        let (scene, origin) = load_scene(request, library, progress)?;
-        SceneSetup::with_scene(Arc::new(scene), &origin, request)
+        if distribution.splits_data() {
+            let part = distributed::load_part(request, library, progress, distribution)?;
+            let share = RankShare {
+                scalar_range: Some(part.scalar_range),
+                traced_tiles: None,
+            };
+            let origin = part.origin;
+            return distribution.agree(SceneSetup::with_scene(
+                Arc::new(part.scene),
+                &origin,
+                request,
+                &share,
+            ));
+        }
+        let share = RankShare {
+            scalar_range: None,
+            traced_tiles: (distribution.size() > 1)
+                .then(|| (distribution.rank(), distribution.size())),
+        };
+        let loaded = load_scene(request, library, progress);
+        let (scene, origin) = distribution.agree(loaded)?;
+        distribution.agree(SceneSetup::with_scene(
+            Arc::new(scene),
+            &origin,
+            request,
+            &share,
+        ))
     }
 
     /// The camera, shading and uniforms of an already loaded scene (`dpp bench`
-    /// builds each scene once and looks at it from several views).
+    /// builds each scene once and looks at it from several views), with what
+    /// this rank's share of a distributed run changes.
     pub fn with_scene(
         scene: Arc<TraceScene>,
         origin: &str,
         request: &SceneRequest,
+        share: &RankShare,
     ) -> Result<SceneSetup, String> {
         let camera = camera(request, &scene).map_err(|e| format!("error: bad camera: {e}"))?;
         let description = format!(
@@ -69,8 +197,19 @@ impl SceneSetup {
             camera.width,
             camera.height
         );
-        let mut resources = TraceResources::new(scene, Arc::new(CameraSetup::new(camera.clone())));
+        let camera_setup = match share.traced_tiles {
+            Some((rank, ranks)) => CameraSetup::tracing_only(camera.clone(), |pixel| {
+                tile_owner(pixel, camera.width, ranks) == rank
+            }),
+            None => CameraSetup::new(camera.clone()),
+        };
+        let mut resources = TraceResources::new(scene, Arc::new(camera_setup));
         let shading = Arc::make_mut(&mut resources.shading);
+        if let Some([min, max]) = share.scalar_range {
+            shading
+                .set_scalar_range(min, max)
+                .map_err(|e| format!("error: {e}"))?;
+        }
         if let Some(path) = scene_file(request) {
             let file = SceneFile::load(&path).map_err(|e| format!("error: {e}"))?;
             shading
@@ -96,20 +235,26 @@ pub fn load_scene(
     library: &FunctorLibrary,
     progress: &Progress,
 ) -> Result<(TraceScene, String), String> {
-    match &request.scene {
-        None => {
+    let builtin = [SceneSpec::Builtin(DEFAULT_RESOLUTION)];
+    let scenes = if request.scenes.is_empty() {
+        &builtin[..]
+    } else {
+        &request.scenes[..]
+    };
+    match scenes {
+        [SceneSpec::Builtin(resolution)] => {
             progress.phase("generating the built-in scene");
             let failed =
                 |e: &dyn std::fmt::Display| format!("error: the built-in scene failed: {e}");
-            let mesh = builtin_scene(DEFAULT_RESOLUTION).map_err(|e| failed(&e))?;
+            let mesh = builtin_scene(*resolution).map_err(|e| failed(&e))?;
             let scene = trace_scene(mesh, MeshMaterials::default(), progress, failed)?;
             Ok((scene, "built-in mixing layer".to_string()))
         }
-        Some(path) if volume_setup::is_volume_path(path) || request.raw.is_some() => Ok((
-            volume_scene(request, path, library, progress)?,
-            path.display().to_string(),
+        [spec] if spec.is_volume(request.raw.as_deref()) => Ok((
+            volume_scene(request, spec, library, progress)?,
+            spec.name(),
         )),
-        Some(path) => {
+        [SceneSpec::File(path)] => {
             progress.phase(format!("loading {}", path.display()));
             let (mesh, materials) = load_mesh(path)?;
             let scene = trace_scene(mesh, materials, progress, |e| {
@@ -117,12 +262,69 @@ pub fn load_scene(
             })?;
             Ok((scene, path.display().to_string()))
         }
+        pieces => {
+            let paths = piece_paths(pieces, request.raw.as_deref())?;
+            let mut meshes = Vec::with_capacity(paths.len());
+            for path in &paths {
+                progress.phase(format!("loading {}", path.display()));
+                meshes.push(load_mesh(path)?.0);
+            }
+            let origin = format!("{} pieces", paths.len());
+            let scene = trace_scene(concat_meshes(meshes), MeshMaterials::default(), progress, |e| {
+                format!("error: cannot use the pieces: {e}")
+            })?;
+            Ok((scene, origin))
+        }
     }
+}
+
+/// The files of a scene given as several pieces: mesh files only.
+pub fn piece_paths(pieces: &[SceneSpec], raw: Option<&str>) -> Result<Vec<PathBuf>, String> {
+    pieces
+        .iter()
+        .map(|piece| match piece {
+            SceneSpec::File(path) if !piece.is_volume(raw) => Ok(path.clone()),
+            other => Err(format!(
+                "error: `{}`: a scene in several pieces is mesh files only (.obj, .ply, gzipped too); give a volume or a built-in scene alone",
+                other.name()
+            )),
+        })
+        .collect()
+}
+
+/// One mesh of several, in their order: triangle ids run on from piece to
+/// piece, as `prim` numbers them. Normals and scalars stay only where every
+/// piece has them (they are computed for the whole otherwise); the pieces'
+/// own materials are not kept.
+pub fn concat_meshes(meshes: Vec<TriangleMesh>) -> TriangleMesh {
+    let all_have = |has: fn(&TriangleMesh) -> bool| meshes.iter().all(has);
+    let (with_normals, with_scalars) = (
+        all_have(|m| m.normals.is_some()),
+        all_have(|m| m.scalars.is_some()),
+    );
+    let mut whole = TriangleMesh {
+        positions: Vec::new(),
+        triangles: Vec::new(),
+        normals: with_normals.then(Vec::new),
+        scalars: with_scalars.then(Vec::new),
+    };
+    for mesh in meshes {
+        let first = whole.positions.len() as u32;
+        whole.positions.extend(&mesh.positions);
+        (whole.triangles).extend(mesh.triangles.iter().map(|t| t.map(|v| v + first)));
+        if let (Some(all), Some(own)) = (&mut whole.normals, &mesh.normals) {
+            all.extend(own);
+        }
+        if let (Some(all), Some(own)) = (&mut whole.scalars, &mesh.scalars) {
+            all.extend(own);
+        }
+    }
+    whole
 }
 
 /// A loaded mesh made ready to trace, in the phases `progress` shows: vertex
 /// normals (for a mesh without them), then the BVH. `failed` words an error.
-fn trace_scene(
+pub fn trace_scene(
     mut mesh: TriangleMesh,
     materials: MeshMaterials,
     progress: &Progress,
@@ -170,20 +372,33 @@ pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, MeshMaterials), String> {
 /// The isosurface of a volume, coloured by height or by a second field.
 pub fn volume_scene(
     request: &SceneRequest,
-    path: &Path,
+    spec: &SceneSpec,
     library: &FunctorLibrary,
     progress: &Progress,
 ) -> Result<TraceScene, String> {
-    progress.phase(format!("loading {}", path.display()));
-    let volume = volume_setup::load_volume(path, request.raw.as_deref())?;
-    let Some(level) = request.iso else {
-        let range = volume.value_range().map_or(String::new(), |(lo, hi)| {
-            format!(" (its values run from {lo} to {hi})")
-        });
-        return Err(format!(
-            "error: `{}` is a volume: give the isosurface level with --iso LEVEL{range}",
-            path.display()
-        ));
+    let volume = match spec {
+        SceneSpec::Generated(dataset, grid) => {
+            progress.phase(format!("generating {}", spec.name()));
+            (dataset.generate(glam::UVec3::from(*grid))).map_err(|e| format!("error: {e}"))?
+        }
+        SceneSpec::File(path) => {
+            progress.phase(format!("loading {}", path.display()));
+            volume_setup::load_volume(path, request.raw.as_deref())?
+        }
+        SceneSpec::Builtin(_) => return Err("error: the built-in scene is not a volume".into()),
+    };
+    let level = match (request.iso, spec) {
+        (Some(level), _) => level,
+        (None, SceneSpec::Generated(dataset, _)) => dataset.default_level(),
+        (None, _) => {
+            let range = volume.value_range().map_or(String::new(), |(lo, hi)| {
+                format!(" (its values run from {lo} to {hi})")
+            });
+            return Err(format!(
+                "error: `{}` is a volume: give the isosurface level with --iso LEVEL{range}",
+                spec.name()
+            ));
+        }
     };
     let iso = IsoRequest {
         level,
@@ -200,7 +415,7 @@ pub fn volume_scene(
         volume_setup::color_by(&mut mesh, &field);
     }
     trace_scene(mesh, MeshMaterials::default(), progress, |e| {
-        format!("error: the isosurface of `{}`: {e}", path.display())
+        format!("error: the isosurface of `{}`: {e}", spec.name())
     })
 }
 
@@ -209,7 +424,9 @@ fn scene_file(request: &SceneRequest) -> Option<PathBuf> {
     if request.scene_file.is_some() {
         return request.scene_file.clone();
     }
-    let scene = request.scene.as_deref()?;
+    let [SceneSpec::File(scene)] = &request.scenes[..] else {
+        return None;
+    };
     let stem = scene.file_name()?.to_string_lossy();
     let stem = stem.strip_suffix(".gz").unwrap_or(&stem);
     let beside = scene.with_file_name(Path::new(stem).with_extension("toml"));
@@ -244,4 +461,13 @@ fn camera(request: &SceneRequest, scene: &TraceScene) -> Result<Camera, String> 
         height,
     )
     .map_err(|e| e.to_string())
+}
+
+/// The short name a generated data set goes by on the command line.
+fn dataset_name(dataset: Dataset) -> &'static str {
+    match dataset {
+        Dataset::RichtmyerMeshkov => "rm",
+        Dataset::LeadTelluride => "pbte",
+        Dataset::Sphere => "sphere",
+    }
 }

@@ -78,6 +78,28 @@ pub fn isosurface(
     request: &IsoRequest,
     library: &FunctorLibrary,
 ) -> Result<TriangleMesh, String> {
+    let range = volume.value_range();
+    let (mesh, _) = isosurface_with_cells(volume, request, library)?;
+    if mesh.triangles.is_empty() {
+        let range = range.map_or("no finite values".to_string(), |(lo, hi)| {
+            format!("values {lo} to {hi}")
+        });
+        return Err(format!(
+            "error: the level {} does not cross the volume ({range}); choose an --iso level inside that range",
+            request.level
+        ));
+    }
+    Ok(mesh)
+}
+
+/// [`isosurface`], without triangles too, and with each triangle's cell (the
+/// pipeline's `cells` output, numbered over `volume`'s own cells): what a
+/// brick of a distributed volume needs to keep its own triangles.
+pub fn isosurface_with_cells(
+    volume: Volume,
+    request: &IsoRequest,
+    library: &FunctorLibrary,
+) -> Result<(TriangleMesh, Vec<u32>), String> {
     if !request.level.is_finite() {
         return Err(format!(
             "error: --iso {} is not a finite level",
@@ -98,7 +120,6 @@ pub fn isosurface(
         ),
     }
     .map_err(|failure| failure.render(false))?;
-    let range = volume.value_range();
     let uniforms = volume_uniforms(&volume);
     let resources = VolumeResources {
         volume: Arc::new(volume),
@@ -111,21 +132,24 @@ pub fn isosurface(
         column_pool: &ColumnPool::new(),
     };
     let result = run_plan(&plan, &context).map_err(|e| format!("error: isosurface: {e}"))?;
-    let Some((_, OutputValue::Array(triangles))) =
-        result.outputs.iter().find(|(n, _)| n == "triangles")
-    else {
-        return Err("error: the isosurface pipeline has no `triangles` output".into());
+    let array = |name: &str| match result.outputs.iter().find(|(n, _)| n == name) {
+        Some((_, OutputValue::Array(array))) => Ok(array.clone()),
+        _ => Err(format!(
+            "error: the isosurface pipeline has no `{name}` output (an array)"
+        )),
     };
-    if triangles.is_empty() {
-        let range = range.map_or("no finite values".to_string(), |(lo, hi)| {
-            format!("values {lo} to {hi}")
-        });
-        return Err(format!(
-            "error: the level {} does not cross the volume ({range}); choose an --iso level inside that range",
-            request.level
-        ));
-    }
-    triangles_to_mesh(triangles, true).map_err(|e| format!("error: {}", e.0))
+    let (triangles, cells) = (array("triangles")?, array("cells")?);
+    let cells = match cells.as_ref() {
+        dpp_runtime::Column::U32(cells) if cells.len() == triangles.len() => cells.clone(),
+        _ => {
+            return Err(
+                "error: the isosurface pipeline's `cells` output must be one u32 cell index per triangle"
+                    .into(),
+            )
+        }
+    };
+    let mesh = triangles_to_mesh(&triangles, true).map_err(|e| format!("error: {}", e.0))?;
+    Ok((mesh, cells))
 }
 
 /// Colours the mesh by a second field: its value at each vertex, trilinearly
@@ -136,7 +160,9 @@ pub fn color_by(mesh: &mut TriangleMesh, field: &Volume) {
 }
 
 fn sample(volume: &Volume, position: glam::Vec3) -> f32 {
-    let grid = ((position - volume.origin) / volume.spacing).max(glam::Vec3::ZERO);
+    // Grid coordinates within this volume (a brick starts at sample `first`).
+    let grid = ((position - volume.origin) / volume.spacing - volume.first.as_vec3())
+        .max(glam::Vec3::ZERO);
     let last = (volume.dims - glam::UVec3::ONE).as_vec3();
     let grid = grid.min(last);
     let base = grid
@@ -170,6 +196,7 @@ mod tests {
             dims,
             spacing: Vec3::new(0.5, 1.0, 2.0),
             origin: Vec3::new(1.0, 0.0, -1.0),
+            first: UVec3::ZERO,
             values: Vec::new(),
         };
         for k in 0..6 {

@@ -46,6 +46,15 @@ pub struct Ranks {
     size: usize,
 }
 
+// SAFETY: the only state that is not plainly Send and Sync is MPI's
+// communicator handle. MPI is initialised with MPI_THREAD_SERIALIZED, which
+// allows calls from any thread as long as no two run at once; dpp calls a
+// `Ranks` only from the thread that drives a run (rayon's workers inside a
+// stage never see it), and a run drives one stage or collective at a time.
+// The handle itself is an opaque value that MPI allows to move between threads.
+unsafe impl Send for Ranks {}
+unsafe impl Sync for Ranks {}
+
 impl std::fmt::Debug for Ranks {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "Ranks({} of {})", self.rank, self.size)

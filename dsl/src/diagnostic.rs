@@ -72,6 +72,8 @@ pub enum Code {
     UnknownField,
     /// `dpp::uniform`: a uniform the library does not provide.
     Uniform,
+    /// `dpp::composite`: a `composite` that is misplaced, or whose blend does not fit it.
+    Composite,
     /// `dpp::internal`: a compiler bug: the plan broke an invariant after a pass.
     Internal,
 }
@@ -112,6 +114,7 @@ impl Code {
             Code::LengthMismatch => "dpp::length-mismatch",
             Code::UnknownField => "dpp::unknown-field",
             Code::Uniform => "dpp::uniform",
+            Code::Composite => "dpp::composite",
             Code::Internal => "dpp::internal",
         }
     }

@@ -887,6 +887,18 @@ impl Builder {
             Rule::compare => self.comparison(pair),
             Rule::prefix => self.prefix(pair),
             Rule::postfix => self.postfix(pair),
+            Rule::paren if pair.clone().into_inner().count() > 1 => {
+                let elements: Vec<Built> =
+                    pair.into_inner().map(|inner| self.expr_node(inner)).collect();
+                let height = elements.iter().map(|e| e.height).max().unwrap_or(0) + 1;
+                Built {
+                    expr: Expr {
+                        kind: ExprKind::Tuple(elements.into_iter().map(|e| e.expr).collect()),
+                        span,
+                    },
+                    height,
+                }
+            }
             Rule::paren => {
                 let inner = pair.into_inner().next().map(|inner| self.expr_node(inner));
                 // The parentheses belong to the expression's span.

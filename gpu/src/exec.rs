@@ -14,7 +14,7 @@ use dpp_runtime::functor::FunctorLibrary;
 use dpp_runtime::host::{HostValue, Uniforms};
 use dpp_runtime::interpret::{
     interpret_observed, Backend, RunError, RunResult, Slots, StageCall, StageMeasurement,
-    StageObserver,
+    RunHooks,
 };
 use dpp_runtime::monoid::MonoidOp;
 use dpp_runtime::types::ElemType;
@@ -42,17 +42,18 @@ pub fn run_plan_gpu(
     plan: &dpp_runtime::Plan,
     context: &GpuRunContext<'_>,
 ) -> Result<RunResult, RunError> {
-    run_plan_gpu_with_inputs(plan, context, Vec::new(), None)
+    run_plan_gpu_with_inputs(plan, context, Vec::new(), RunHooks::default())
 }
 
-/// [`run_plan_gpu`], telling `observer` of every stage before it is issued
-/// (the device may still be working on earlier stages).
+/// [`run_plan_gpu`] with the run's hooks: an observer told of every stage
+/// before it is issued (the device may still be working on earlier stages),
+/// the other ranks.
 pub fn run_plan_gpu_observed(
     plan: &dpp_runtime::Plan,
     context: &GpuRunContext<'_>,
-    observer: Option<StageObserver<'_>>,
+    hooks: RunHooks<'_>,
 ) -> Result<RunResult, RunError> {
-    run_plan_gpu_with_inputs(plan, context, Vec::new(), observer)
+    run_plan_gpu_with_inputs(plan, context, Vec::new(), hooks)
 }
 
 /// Runs `plan` with some array variables already on the device.
@@ -60,7 +61,7 @@ pub(crate) fn run_plan_gpu_with_inputs(
     plan: &dpp_runtime::Plan,
     context: &GpuRunContext<'_>,
     inputs: Vec<(dpp_runtime::compile::ir::VarId, GpuArray)>,
-    observer: Option<StageObserver<'_>>,
+    hooks: RunHooks<'_>,
 ) -> Result<RunResult, RunError> {
     let gpu = context.gpu;
     let records = &context.library.records;
@@ -98,7 +99,7 @@ pub(crate) fn run_plan_gpu_with_inputs(
         context.uniforms,
         records,
         inputs,
-        observer,
+        hooks,
     )?;
     backend.check_status()?;
     Ok(result)
@@ -736,6 +737,10 @@ impl Backend for GpuBackend<'_> {
         download(self.gpu, array, &self.library.records)
             .map(Arc::new)
             .map_err(RunError::from)
+    }
+
+    fn from_column(&mut self, column: Arc<Column>) -> Result<GpuArray, RunError> {
+        crate::array::upload(self.gpu, &column).map_err(RunError::from)
     }
 }
 

@@ -117,7 +117,7 @@ pub fn run_functor_gpu(
         .zip(inputs)
         .map(|(var, column)| Ok((*var, upload(context.gpu, column).map_err(RunError::from)?)))
         .collect::<Result<Vec<_>, RunError>>()?;
-    let result = run_plan_gpu_with_inputs(&plan, context, uploaded, None)?;
+    let result = run_plan_gpu_with_inputs(&plan, context, uploaded, Default::default())?;
     match result.outputs.into_iter().next() {
         Some((_, OutputValue::Array(column))) => Ok(std::sync::Arc::unwrap_or_clone(column)),
         _ => Err(RunError::internal("the functor produced no array")),

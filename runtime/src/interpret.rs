@@ -112,9 +112,12 @@ pub struct StageMeasurement {
 
 #[derive(Clone, Debug)]
 pub struct RunResult {
-    /// In the order of the pipeline's `out` declarations.
+    /// In the order of the pipeline's `out` declarations; none on a rank
+    /// whose part of the image went to rank 0 at `composite`.
     pub outputs: Vec<(String, OutputValue)>,
     pub profile: Vec<StageTiming>,
+    /// Whether this rank's run ended at `composite`, rank 0 holding the outputs.
+    pub composited_elsewhere: bool,
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -259,6 +262,10 @@ pub trait Backend {
     /// The array as a host column, for the run's outputs.
     fn to_column(&mut self, array: &Self::Array) -> Result<Arc<Column>, RunError>;
 
+    /// A host column as the backend's array: `composite` hands the pieces
+    /// other ranks sent to the blend, and the whole image to the rest of the run.
+    fn from_column(&mut self, column: Arc<Column>) -> Result<Self::Array, RunError>;
+
     /// A slot lets go of `array` (it was rebound, or the run ended): a backend
     /// that reuses memory takes it back here; the others drop it.
     fn release(&mut self, array: Self::Array) {
@@ -284,6 +291,36 @@ pub struct StageStart<'a> {
 /// thread that drives the run).
 pub type StageObserver<'a> = &'a (dyn Fn(&StageStart<'_>) + Sync);
 
+/// Combines two pieces of the image (each a range of the same pixels), the
+/// one nearer the front first; the blended arrays in the order given.
+pub type Blend<'b> =
+    dyn FnMut(&[Arc<Column>], &[Arc<Column>]) -> Result<Vec<Arc<Column>>, RunError> + 'b;
+
+/// Where a plan's `composite` meets the other ranks: the schedule that moves
+/// the pieces between them (docs/language.md §3, composite). The per-pixel
+/// blend is the plan's; the compositor calls it.
+pub trait Compositor: Sync {
+    /// Composites this rank's per-pixel arrays with every other rank's, in
+    /// rank order or, with `visibility`, front to back in visibility order.
+    /// The whole image on the rank that goes on with the run (rank 0), `None`
+    /// on the others, whose run ends here.
+    fn composite(
+        &self,
+        fragments: Vec<Arc<Column>>,
+        visibility: bool,
+        blend: &mut Blend<'_>,
+    ) -> Result<Option<Vec<Arc<Column>>>, RunError>;
+}
+
+/// What a run tells, and whom it asks, besides its backend.
+#[derive(Clone, Copy, Default)]
+pub struct RunHooks<'a> {
+    /// Told of every stage before it runs.
+    pub observer: Option<StageObserver<'a>>,
+    /// The other ranks, for `composite`; without one the run is the only rank.
+    pub compositor: Option<&'a dyn Compositor>,
+}
+
 /// Runs `plan` on `backend`.
 pub fn interpret<B: Backend>(
     plan: &Plan,
@@ -303,17 +340,18 @@ pub fn interpret_with_inputs<B: Backend>(
     records: &RecordRegistry,
     inputs: Vec<(VarId, B::Array)>,
 ) -> Result<RunResult, RunError> {
-    interpret_observed(plan, backend, uniforms, records, inputs, None)
+    interpret_observed(plan, backend, uniforms, records, inputs, RunHooks::default())
 }
 
-/// [`interpret_with_inputs`], telling `observer` of every stage before it runs.
+/// [`interpret_with_inputs`] with the run's hooks: an observer told of every
+/// stage before it runs, the other ranks.
 pub fn interpret_observed<B: Backend>(
     plan: &Plan,
     backend: &mut B,
     uniforms: &Uniforms,
     records: &RecordRegistry,
     inputs: Vec<(VarId, B::Array)>,
-    observer: Option<StageObserver<'_>>,
+    hooks: RunHooks<'_>,
 ) -> Result<RunResult, RunError> {
     let stages = plan.stages();
     let mut interpreter = Interpreter {
@@ -339,7 +377,9 @@ pub fn interpret_observed<B: Backend>(
             })
             .collect(),
         stages,
-        observer,
+        observer: hooks.observer,
+        compositor: hooks.compositor,
+        composited_elsewhere: false,
     };
     for (var, array) in inputs {
         interpreter.slots.set_array(var, array);
@@ -350,7 +390,13 @@ pub fn interpret_observed<B: Backend>(
         interpreter.backend.release(array);
     }
     let mut outputs = Vec::new();
-    for name in &plan.outputs {
+    // This rank's part went to rank 0 at `composite`: the outputs are rank 0's.
+    let written = if interpreter.composited_elsewhere {
+        &[][..]
+    } else {
+        &plan.outputs[..]
+    };
+    for name in written {
         match interpreter.outputs.iter().rev().find(|(n, _)| n == name) {
             Some(found) => outputs.push(found.clone()),
             None => {
@@ -363,12 +409,15 @@ pub fn interpret_observed<B: Backend>(
     Ok(RunResult {
         outputs,
         profile: interpreter.profile,
+        composited_elsewhere: interpreter.composited_elsewhere,
     })
 }
 
 enum Flow {
     Continue,
     Break,
+    /// This rank's part of the image went to rank 0: its run is over.
+    Composited,
 }
 
 struct Interpreter<'a, B: Backend> {
@@ -381,6 +430,9 @@ struct Interpreter<'a, B: Backend> {
     profile: Vec<StageTiming>,
     stages: Vec<&'a Stage>,
     observer: Option<StageObserver<'a>>,
+    compositor: Option<&'a dyn Compositor>,
+    /// Set once `composite` sent this rank's part to rank 0.
+    composited_elsewhere: bool,
 }
 
 struct Environment<'a, A: Clone, B: Backend<Array = A>> {
@@ -530,8 +582,10 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                     }
                     for i in start..end {
                         self.slots.set_host(*var, HostValue::Int(i));
-                        if let Flow::Break = self.nodes(body)? {
-                            break;
+                        match self.nodes(body)? {
+                            Flow::Continue => {}
+                            Flow::Break => break,
+                            Flow::Composited => return Ok(Flow::Composited),
                         }
                     }
                 }
@@ -544,8 +598,10 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                                 "a `while` loop ran {MAX_LOOP_ITERATIONS} times; stopping (is its condition ever false?)"
                             )));
                         }
-                        if let Flow::Break = self.nodes(body)? {
-                            break;
+                        match self.nodes(body)? {
+                            Flow::Continue => {}
+                            Flow::Break => break,
+                            Flow::Composited => return Ok(Flow::Composited),
                         }
                     }
                 }
@@ -560,11 +616,18 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                     } else {
                         else_body
                     };
-                    if let Flow::Break = self.nodes(branch)? {
-                        return Ok(Flow::Break);
+                    match self.nodes(branch)? {
+                        Flow::Continue => {}
+                        flow => return Ok(flow),
                     }
                 }
                 Node::Break => return Ok(Flow::Break),
+                Node::Composite(composite) => {
+                    if !self.composite(composite)? {
+                        self.composited_elsewhere = true;
+                        return Ok(Flow::Composited);
+                    }
+                }
                 Node::Output { name, var } => {
                     let value = match self.plan.var(*var).ty {
                         VarType::Host(_) => {
@@ -582,6 +645,72 @@ impl<'a, B: Backend> Interpreter<'a, B> {
             }
         }
         Ok(Flow::Continue)
+    }
+
+    /// Hands this rank's pieces to the compositor, which runs the blend as
+    /// it needs it; binds the composited image and returns true on the rank
+    /// that goes on, returns false on the others. Without a compositor the
+    /// run is the only rank: the image is its own, and the blend never runs.
+    fn composite(&mut self, composite: &'a Composite) -> Result<bool, RunError> {
+        let Some(compositor) = self.compositor else {
+            for (&input, &output) in composite.inputs.iter().zip(&composite.outputs) {
+                let value = self.slots.array(self.plan, input)?.clone();
+                self.store(output, value);
+            }
+            return Ok(true);
+        };
+        let visibility = self.eval(&composite.visibility)?.as_bool() == Some(true);
+        let mut fragments = Vec::with_capacity(composite.inputs.len());
+        for &input in &composite.inputs {
+            let array = self.slots.array(self.plan, input)?.clone();
+            fragments.push(self.backend.to_column(&array)?);
+        }
+        let mut blend = |front: &[Arc<Column>], back: &[Arc<Column>]| {
+            self.blend(composite, front, back)
+        };
+        let whole = compositor
+            .composite(fragments, visibility, &mut blend)
+            .map_err(|e| e.within(format_args!("composite<{}>", composite.blend_fn)))?;
+        let Some(whole) = whole else {
+            return Ok(false);
+        };
+        for (&output, column) in composite.outputs.iter().zip(whole) {
+            let array = self.backend.from_column(column)?;
+            self.store(output, array);
+        }
+        Ok(true)
+    }
+
+    /// One run of a composite's blend on two pieces.
+    fn blend(
+        &mut self,
+        composite: &'a Composite,
+        front: &[Arc<Column>],
+        back: &[Arc<Column>],
+    ) -> Result<Vec<Arc<Column>>, RunError> {
+        for (vars, pieces) in [(&composite.front, front), (&composite.back, back)] {
+            if pieces.len() != vars.len() {
+                return Err(RunError::internal(format!(
+                    "the blend takes {} arrays per piece, the compositor gave {}",
+                    vars.len(),
+                    pieces.len()
+                )));
+            }
+            for (&var, piece) in vars.iter().zip(pieces) {
+                let array = self.backend.from_column(piece.clone())?;
+                self.store(var, array);
+            }
+        }
+        match self.nodes(&composite.blend)? {
+            Flow::Continue => {}
+            _ => return Err(RunError::internal("the blend left its body early")),
+        }
+        let mut blended = Vec::with_capacity(composite.blended.len());
+        for &var in &composite.blended {
+            let array = self.slots.array(self.plan, var)?.clone();
+            blended.push(self.backend.to_column(&array)?);
+        }
+        Ok(blended)
     }
 
     /// Runs one stage; returns the number of elements it ran over and the

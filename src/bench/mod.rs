@@ -19,14 +19,14 @@ mod chart;
 mod report;
 
 use crate::outputs::write_atomically;
-use crate::scene_setup::{self, SceneRequest, SceneSetup};
+use crate::scene_setup::{self, SceneRequest, SceneSetup, SceneSpec};
 use crate::{volume_setup, Backend, Failure};
 use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, RunContext};
 use dpp_runtime::interpret::{OpTiming, OutputValue, RunResult, StageTiming};
 use dpp_runtime::{CompileOptions, FunctorLibrary, Plan};
-use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
+use dpp_tracer::builtin_scene::builtin_scene;
 use dpp_tracer::camera::sample_offset;
 use dpp_tracer::shading::MeshMaterials;
 use dpp_tracer::{Camera, StandardView, TraceScene, TriangleMesh, MISS_PRIM};
@@ -85,8 +85,9 @@ const SAME_DISTANCE: f32 = 1e-6;
 #[derive(clap::Args)]
 pub struct BenchArgs {
     /// Scenes: `builtin` (the default), `builtin:RESOLUTION` (cells along x and y,
-    /// 8 to 512), `rm:X,Y,Z` (the Richtmyer–Meshkov volume of that grid, at level
-    /// 128), or a mesh file (.obj, .ply, .obj.gz, .ply.gz; a volume with --iso).
+    /// 8 to 512), `rm:X,Y,Z`, `pbte:X,Y,Z`, `sphere:X,Y,Z` (a generated volume on
+    /// that grid, at its default level unless --iso), or a mesh file (.obj, .ply,
+    /// .obj.gz, .ply.gz; a volume with --iso).
     #[arg(value_name = "SCENE")]
     scenes: Vec<String>,
     /// Image size.
@@ -148,73 +149,6 @@ pub enum EmbreeTest {
     Fast,
 }
 
-/// A scene as the command line names it.
-#[derive(Clone, Debug, PartialEq)]
-enum SceneSpec {
-    Builtin(u32),
-    Rm([u32; 3]),
-    File(PathBuf),
-}
-
-impl SceneSpec {
-    fn parse(text: &str) -> Result<SceneSpec, String> {
-        if text == "builtin" {
-            return Ok(SceneSpec::Builtin(DEFAULT_RESOLUTION));
-        }
-        if let Some(resolution) = text.strip_prefix("builtin:") {
-            let resolution: u32 = resolution.parse().map_err(|_| {
-                format!("error: `{text}`: the built-in scene's resolution is a whole number (like builtin:224)")
-            })?;
-            let range = dpp_tracer::builtin_scene::MIN_RESOLUTION
-                ..=dpp_tracer::builtin_scene::MAX_RESOLUTION;
-            if !range.contains(&resolution) {
-                return Err(format!(
-                    "error: `{text}`: the built-in scene's resolution must be in {}..={}",
-                    range.start(),
-                    range.end()
-                ));
-            }
-            return Ok(SceneSpec::Builtin(resolution));
-        }
-        if let Some(grid) = text.strip_prefix("rm:") {
-            let grid = match crate::parse_grid(grid) {
-                Ok(grid) => grid,
-                Err(_) => match grid.parse::<u32>() {
-                    Ok(n) => [n; 3],
-                    Err(_) => {
-                        return Err(format!(
-                        "error: `{text}`: give the volume's grid as rm:X,Y,Z (like rm:128,128,128)"
-                    ))
-                    }
-                },
-            };
-            if grid.iter().any(|&n| !(4..=1024).contains(&n)) {
-                return Err(format!(
-                    "error: `{text}`: each grid size must be in 4..=1024"
-                ));
-            }
-            return Ok(SceneSpec::Rm(grid));
-        }
-        let path = PathBuf::from(text);
-        if !path.is_file() {
-            return Err(format!(
-                "error: scene `{text}` is not a file (nor builtin, builtin:RESOLUTION or rm:X,Y,Z)"
-            ));
-        }
-        Ok(SceneSpec::File(path))
-    }
-
-    fn name(&self) -> String {
-        match self {
-            SceneSpec::Builtin(resolution) => format!("builtin:{resolution}"),
-            SceneSpec::Rm([x, y, z]) => format!("rm:{x},{y},{z}"),
-            SceneSpec::File(path) => path.file_name().map_or_else(
-                || path.display().to_string(),
-                |n| n.to_string_lossy().into(),
-            ),
-        }
-    }
-}
 
 /// Embree's modes, the engines WORKLOAD1 is compared with.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -633,7 +567,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         };
         for (view_name, _) in &setup.views {
             let request = scene_request(spec, view_name, args.size, args.iso);
-            let view = SceneSetup::with_scene(scene.clone(), &spec.name(), &request)
+            let view = SceneSetup::with_scene(scene.clone(), &spec.name(), &request, &Default::default())
                 .map_err(Failure::Input)?;
             let rays = u64::from(view.camera.pixels());
             let mut view_result = ViewResult {
@@ -827,10 +761,7 @@ fn progress_bar(total: u64) -> ProgressBar {
 /// What a run of `dpp run` would ask for, for one view of the scene.
 fn scene_request(spec: &SceneSpec, view: &str, size: (u32, u32), iso: Option<f32>) -> SceneRequest {
     SceneRequest {
-        scene: match spec {
-            SceneSpec::File(path) => Some(path.clone()),
-            _ => None,
-        },
+        scenes: vec![spec.clone()],
         size,
         view: view.to_string(),
         eye: None,
@@ -862,18 +793,11 @@ fn load(spec: &SceneSpec, args: &BenchArgs, library: &FunctorLibrary) -> Result<
             builtin_scene(*resolution).map_err(|e| Failure::Input(format!("error: {e}")))?,
             MeshMaterials::default(),
         ),
-        SceneSpec::Rm(grid) => {
-            let volume = dpp_tracer::volume::generate::Dataset::RichtmyerMeshkov
-                .generate(glam::UVec3::from(*grid))
+        SceneSpec::Generated(dataset, grid) => {
+            let volume = (dataset.generate(glam::UVec3::from(*grid)))
                 .map_err(|e| Failure::Input(format!("error: {e}")))?;
-            (
-                iso_mesh(
-                    volume,
-                    dpp_tracer::volume::generate::RM_DEFAULT_LEVEL,
-                    library,
-                )?,
-                MeshMaterials::default(),
-            )
+            let level = args.iso.unwrap_or(dataset.default_level());
+            (iso_mesh(volume, level, library)?, MeshMaterials::default())
         }
         SceneSpec::File(path) if volume_setup::is_volume_path(path) => {
             let Some(level) = args.iso else {
@@ -1143,6 +1067,8 @@ fn cpu_model() -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dpp_tracer::builtin_scene::DEFAULT_RESOLUTION;
+    use dpp_tracer::volume::generate::Dataset;
     use glam::Vec3;
 
     #[test]
@@ -1154,15 +1080,23 @@ mod tests {
         assert_eq!(SceneSpec::parse("builtin:64"), Ok(SceneSpec::Builtin(64)));
         assert_eq!(
             SceneSpec::parse("rm:128,64,32"),
-            Ok(SceneSpec::Rm([128, 64, 32]))
+            Ok(SceneSpec::Generated(Dataset::RichtmyerMeshkov, [128, 64, 32]))
         );
-        assert_eq!(SceneSpec::parse("rm:96"), Ok(SceneSpec::Rm([96; 3])));
+        assert_eq!(
+            SceneSpec::parse("rm:96"),
+            Ok(SceneSpec::Generated(Dataset::RichtmyerMeshkov, [96; 3]))
+        );
+        assert_eq!(
+            SceneSpec::parse("sphere:16,8,8"),
+            Ok(SceneSpec::Generated(Dataset::Sphere, [16, 8, 8]))
+        );
         for bad in [
             "builtin:2",
             "builtin:x",
             "rm:",
             "rm:1,2",
             "rm:2000",
+            "pbte:x",
             "/no/such.ply",
         ] {
             assert!(SceneSpec::parse(bad).is_err(), "{bad}");

@@ -208,6 +208,29 @@ impl CameraSetup {
             morton_pixels,
         }
     }
+
+    /// The camera tracing only the pixels `traced` keeps (a rank's share of
+    /// the image), still in Morton order: `camera.tracedPixels` rays then
+    /// cover them, and the image keeps every pixel's slot.
+    pub fn tracing_only(camera: Camera, traced: impl Fn(u32) -> bool) -> CameraSetup {
+        let mut setup = CameraSetup::new(camera);
+        setup.morton_pixels.retain(|&pixel| traced(pixel));
+        setup
+    }
+}
+
+/// Side of the square tiles that image decomposition deals out to ranks.
+pub const TILE_SIZE: u32 = 32;
+
+/// Which of `ranks` ranks traces `pixel` (row-major) under image
+/// decomposition: tiles of [`TILE_SIZE`] dealt out in turn, row by row, so
+/// that every rank gets some of every part of the image (balance without
+/// knowing where the work is).
+pub fn tile_owner(pixel: u32, width: u32, ranks: usize) -> usize {
+    let (x, y) = (pixel % width, pixel / width);
+    let tiles_per_row = width.div_ceil(TILE_SIZE);
+    let tile = u64::from(y / TILE_SIZE) * u64::from(tiles_per_row) + u64::from(x / TILE_SIZE);
+    (tile % ranks as u64) as usize
 }
 
 /// Row-major indices of a `width × height` image in Z-curve order (x in the even

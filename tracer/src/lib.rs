@@ -30,10 +30,11 @@ use dpp_runtime::{ElemType, FunctorLibrary, HostType, HostValue, RecordId, Recor
 use std::sync::Arc;
 
 /// The uniform fields the tracer fills, by record: `(record, field, type)`.
-pub const UNIFORM_FIELDS: [(&str, &str, HostType); 13] = [
+pub const UNIFORM_FIELDS: [(&str, &str, HostType); 14] = [
     ("camera", "width", HostType::Int),
     ("camera", "height", HostType::Int),
     ("camera", "pixels", HostType::Int),
+    ("camera", "tracedPixels", HostType::Int),
     ("camera", "fov", HostType::Float),
     ("camera", "eye", HostType::Vec3),
     ("camera", "lookAt", HostType::Vec3),
@@ -118,6 +119,8 @@ pub fn uniforms(scene: &TraceScene, camera: &CameraSetup, shading: &Shading) -> 
     uniforms.set("camera", "width", HostValue::Int(view.width.into()));
     uniforms.set("camera", "height", HostValue::Int(view.height.into()));
     uniforms.set("camera", "pixels", HostValue::Int(view.pixels().into()));
+    let traced = camera.morton_pixels.len() as i64;
+    uniforms.set("camera", "tracedPixels", HostValue::Int(traced));
     uniforms.set("camera", "fov", HostValue::Float(view.fov_degrees.into()));
     uniforms.set("camera", "eye", vec3(view.eye));
     uniforms.set("camera", "lookAt", vec3(view.look_at));

@@ -80,6 +80,7 @@ cases! { check:
     keywords_inside_names => "param input = 1\nparam format = 2\npipeline outIn { iffy = input + format; returned = 1; breakfast = fnord; truely = true }",
     unicode_in_comments => "// résumé → ∑\npipeline p { out x = 1 } // ünïcode",
     comments_between_tokens => "pipeline p {\n x = a // the source\n   // a whole comment line\n   → map<f> // then f\n   -> gather<g>(group: 2, // per pair\n   )\n}",
+    tuples => "fn two(a, b) { return (b, a,) }\npipeline p {\n (x, y) = (a, map<f>(b))\n z = (a, b) → map<g>\n w = (a)\n}",
     crlf_and_tabs => "param a = 1\r\n\r\npipeline p {\r\n\tx = a -> map<f>\r\n\t(y, z) = x\t// c\r\n\tout y\r\n}\r\n",
 }
 
@@ -210,6 +211,10 @@ impl SexprPrinter {
             }
             ExprKind::Binary { op, lhs, rhs } => {
                 format!("({} {} {})", op.symbol(), Self::expr(lhs), Self::expr(rhs))
+            }
+            ExprKind::Tuple(elements) => {
+                let elements: Vec<String> = elements.iter().map(Self::expr).collect();
+                format!("(tuple {})", elements.join(" "))
             }
         }
     }
@@ -362,6 +367,9 @@ impl SpanPrinter<'_> {
             ExprKind::Binary { lhs, rhs, .. } => self.nested("binary", expr.span, |p| {
                 p.expr(lhs);
                 p.expr(rhs);
+            }),
+            ExprKind::Tuple(elements) => self.nested("tuple", expr.span, |p| {
+                elements.iter().for_each(|e| p.expr(e));
             }),
         }
     }

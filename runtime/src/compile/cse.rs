@@ -103,6 +103,19 @@ fn cse_block(
                 bump_nested_writes(then_body, &mut generation);
                 bump_nested_writes(else_body, &mut generation);
             }
+            Node::Composite(composite) => {
+                // The blend sees only its pieces (a fn's body sees none of the
+                // caller's names), so it starts from nothing computed.
+                cse_block(
+                    &mut composite.blend,
+                    definitions,
+                    renames,
+                    Available::default(),
+                );
+                for v in node_writes(&node) {
+                    *generation.entry(v).or_default() += 1;
+                }
+            }
             other => {
                 for v in node_writes(other) {
                     *generation.entry(v).or_default() += 1;
@@ -183,6 +196,12 @@ pub fn rename_reads(nodes: &mut [Node], from: VarId, to: VarId) {
                 rename_reads(else_body, from, to);
             }
             Node::Output { var, .. } => swap(var),
+            Node::Composite(composite) => {
+                composite.inputs.iter_mut().for_each(swap);
+                composite.blended.iter_mut().for_each(swap);
+                rename_in_host(&mut composite.visibility, from, to);
+                rename_reads(&mut composite.blend, from, to);
+            }
             Node::Break => {}
         }
     }

@@ -33,8 +33,13 @@ pub fn form_stages(body: Vec<Node>, vars: &[VarInfo], fuse: bool) -> Vec<Node> {
         for v in node_writes(node) {
             usage.definitions[v.0 as usize] += 1;
         }
-        if let Node::Output { var, .. } = node {
-            usage.outputs.insert(*var);
+        match node {
+            Node::Output { var, .. } => {
+                usage.outputs.insert(*var);
+            }
+            // What a blend returns leaves it for the compositor, as an output does.
+            Node::Composite(composite) => usage.outputs.extend(&composite.blended),
+            _ => {}
         }
     });
     let mut mentioned_by = vec![Vec::new(); vars.len()];
@@ -271,7 +276,13 @@ impl StageFormer<'_> {
                     for var in node_writes(&other) {
                         self.wrote(var);
                     }
-                    if let Node::For { body, .. } | Node::While { body, .. } = &other {
+                    let body = match &other {
+                        Node::For { body, .. } | Node::While { body, .. } => Some(body),
+                        // A blend runs once per exchange, like a loop body.
+                        Node::Composite(composite) => Some(&composite.blend),
+                        _ => None,
+                    };
+                    if let Some(body) = body {
                         let mut written = Vec::new();
                         walk_nodes(body, &mut |node| written.extend(node_writes(node)));
                         for var in written {
@@ -308,6 +319,10 @@ impl StageFormer<'_> {
                             then_body: self.block(then_body),
                             else_body: self.block(else_body),
                         },
+                        Node::Composite(mut composite) => {
+                            composite.blend = self.block(std::mem::take(&mut composite.blend));
+                            Node::Composite(composite)
+                        }
                         other => other,
                     });
                 }

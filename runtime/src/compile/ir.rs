@@ -441,11 +441,40 @@ pub enum Node {
         else_body: Vec<Node>,
     },
     Break,
+    /// `composite<blend>(a, b, …)`: sort-last compositing across ranks.
+    Composite(Box<Composite>),
     /// `out name = …`: the value of `var` when this runs becomes output `name`.
     Output {
         name: String,
         var: VarId,
     },
+}
+
+/// The callee of [`Composite`]: a reserved name like the primitives'.
+pub const COMPOSITE: &str = "composite";
+
+/// `(a#1, b#1) = composite<blend>(a, b)`: this rank's per-pixel arrays
+/// `inputs` and every other rank's, composited into `outputs` — the whole
+/// image, which only rank 0 goes on with: the run of every other rank ends
+/// here. The schedule that moves the pieces is the run's (docs/language.md
+/// §3, composite); how two pieces combine is `blend`, the nodes of the fn
+/// `blend_fn` inlined with its parameters bound to `front` (the piece nearer
+/// the front of the order) and `back`, leaving the blended arrays in
+/// `blended`. With one rank `outputs` are `inputs` and `blend` never runs.
+#[derive(Clone, Debug, Serialize)]
+pub struct Composite {
+    pub blend_fn: String,
+    pub inputs: Vec<VarId>,
+    pub outputs: Vec<VarId>,
+    pub front: Vec<VarId>,
+    pub back: Vec<VarId>,
+    pub blend: Vec<Node>,
+    pub blended: Vec<VarId>,
+    /// Whether pieces go front to back in visibility order (translucent
+    /// images) rather than rank order (nearest depth, ties to the lower rank).
+    pub visibility: HostExpr,
+    #[serde(skip)]
+    pub span: Span,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -485,6 +514,7 @@ impl Plan {
                 match node {
                     Node::Stage(s) => out.push(s),
                     Node::For { body, .. } | Node::While { body, .. } => walk(body, out),
+                    Node::Composite(composite) => walk(&composite.blend, out),
                     Node::If {
                         then_body,
                         else_body,
@@ -515,6 +545,7 @@ impl Plan {
             Node::Host { expr, .. } => exprs.push(expr),
             Node::For { start, end, .. } => exprs.extend([start, end]),
             Node::While { cond, .. } | Node::If { cond, .. } => exprs.push(cond),
+            Node::Composite(composite) => exprs.push(&composite.visibility),
             Node::View { .. } | Node::Alias { .. } | Node::Break | Node::Output { .. } => {}
         });
         let mut uniforms = Vec::new();
@@ -535,6 +566,7 @@ pub fn walk_nodes<'a>(nodes: &'a [Node], visit: &mut impl FnMut(&'a Node)) {
         visit(node);
         match node {
             Node::For { body, .. } | Node::While { body, .. } => walk_nodes(body, visit),
+            Node::Composite(composite) => walk_nodes(&composite.blend, visit),
             Node::If {
                 then_body,
                 else_body,
@@ -592,6 +624,10 @@ pub fn node_reads(node: &Node) -> Vec<VarId> {
             host(end, &mut reads);
         }
         Node::While { cond, .. } | Node::If { cond, .. } => host(cond, &mut reads),
+        Node::Composite(composite) => {
+            reads.extend(&composite.inputs);
+            host(&composite.visibility, &mut reads);
+        }
         Node::Break => {}
         Node::Output { var, .. } => reads.push(*var),
     }
@@ -605,6 +641,12 @@ pub fn node_writes(node: &Node) -> Vec<VarId> {
         Node::Stage(stage) => stage.ops.iter().flat_map(|op| op.outputs.clone()).collect(),
         Node::Host { dst, .. } | Node::Alias { dst, .. } | Node::View { dst, .. } => vec![*dst],
         Node::For { var, .. } => vec![*var],
+        // `front` and `back` are bound before each run of the blend, like a loop's counter.
+        Node::Composite(composite) => (composite.outputs.iter())
+            .chain(&composite.front)
+            .chain(&composite.back)
+            .copied()
+            .collect(),
         _ => Vec::new(),
     }
 }

@@ -35,6 +35,7 @@ pub fn lower_program(
         outputs: Vec::new(),
         params: HashMap::new(),
         inlined: HashSet::new(),
+        composited: None,
     };
     let mut params = Vec::new();
     let mut body = Vec::new();
@@ -123,6 +124,8 @@ struct Lowerer<'a, 'p> {
     params: HashMap<String, VarId>,
     /// Names of the fns inlined at least once.
     inlined: HashSet<String>,
+    /// Where the pipeline composites, once it has.
+    composited: Option<Span>,
 }
 
 impl Lowerer<'_, '_> {
@@ -599,6 +602,17 @@ impl Lowerer<'_, '_> {
                 }
             }
             ExprKind::Field { base, field } => self.lower_field(expr, base, field, out),
+            ExprKind::Tuple(elements) => {
+                let mut vars = Vec::new();
+                for element in elements {
+                    let value = self.lower_expr(element, out);
+                    match self.expect_array((value, element.span)) {
+                        Some(var) => vars.push(var),
+                        None => return Value::Error,
+                    }
+                }
+                Value::Tuple(vars)
+            }
             ExprKind::Call(call) => self.lower_call(call, expr.span, out),
             ExprKind::Unary { op, operand } => {
                 let operand = self.lower_host(operand, out);
@@ -749,6 +763,9 @@ impl Lowerer<'_, '_> {
             }
         }
 
+        if callee == COMPOSITE {
+            return self.lower_composite(call, span, positional, named, out);
+        }
         let primitive = Primitive::from_name(callee);
         if let Some(functor) = call.functor.as_ref().filter(|_| primitive.is_none()) {
             self.error(Diagnostic::error(
@@ -1047,6 +1064,152 @@ impl Lowerer<'_, '_> {
         self.scopes.pop();
         self.fn_stack.pop();
         result
+    }
+
+    /// `composite<blend>(a, b, …)`: the blend fn is inlined once, into the
+    /// node's own body, with its first half of parameters bound to the front
+    /// piece's arrays and its second half to the back piece's.
+    fn lower_composite(
+        &mut self,
+        call: &Call,
+        span: Span,
+        positional: Vec<(Value, Span)>,
+        named: Vec<(&Ident, &ast::Expr)>,
+        out: &mut Vec<Node>,
+    ) -> Value {
+        let misplaced = |what: &str| {
+            Diagnostic::error(Code::Composite, format!("`composite` {what}"), span).with_help(
+                "composite once, at the top level of the pipeline: what follows runs on rank 0 alone",
+            )
+        };
+        if !self.fn_stack.is_empty() || self.scopes.len() != 1 {
+            self.error(misplaced("must be at the top level of the pipeline, not in a fn, loop or branch"));
+            return Value::Error;
+        }
+        if let Some(first) = self.composited {
+            self.error(misplaced("may appear only once").with_label(first, "the first one"));
+            return Value::Error;
+        }
+        self.composited = Some(span);
+        if let Some(output) = self.outputs.first() {
+            self.error(misplaced(&format!(
+                "comes after the output `{output}`, which would hold rank 0's part of the image only"
+            )));
+        }
+        let Some(blend_name) = &call.functor else {
+            self.error(
+                Diagnostic::error(
+                    Code::MissingFunctor,
+                    "`composite` needs its blend: `composite<blend>(…)`, a fn of the file",
+                    span,
+                )
+                .with_help("for opaque surfaces: `composite<nearestDepth>(color, depth)` with `use \"composite.dpp\"`"),
+            );
+            return Value::Error;
+        };
+        let Some(function) = self.program.fns.get(blend_name.name.as_str()).copied() else {
+            let mut diagnostic = Diagnostic::error(
+                Code::UnknownName,
+                format!("the blend of `composite` must be a fn of the file; there is no fn `{}`", blend_name.name),
+                blend_name.span,
+            );
+            if let Some(s) = did_you_mean(&blend_name.name, self.program.fns.keys().copied()) {
+                diagnostic = diagnostic.with_help(format!("did you mean `{s}`?"));
+            }
+            self.error(diagnostic);
+            return Value::Error;
+        };
+        let mut visibility = HostExpr::Const(HostValue::Bool(false));
+        for (name, value) in named {
+            if name.name == "visibility" {
+                visibility = self.lower_host(value, out);
+            } else {
+                self.error(
+                    Diagnostic::error(
+                        Code::UnknownArgument,
+                        format!("`composite` has no argument `{}`", name.name),
+                        name.span,
+                    )
+                    .with_help("its one named argument is `visibility: BOOL`"),
+                );
+            }
+        }
+        let mut inputs = Vec::new();
+        for argument in positional {
+            match self.expect_array(argument) {
+                Some(var) => inputs.push(var),
+                None => return Value::Error,
+            }
+        }
+        if inputs.is_empty() {
+            self.error(Diagnostic::error(
+                Code::Arity,
+                "`composite` takes the arrays of this rank's image: at least one",
+                span,
+            ));
+            return Value::Error;
+        }
+        let piece = |lowerer: &mut Self, side: &str| -> Vec<VarId> {
+            (inputs.iter())
+                .map(|&input| {
+                    let name = format!("{side}.{}", lowerer.vars[input.0 as usize].name);
+                    lowerer.new_var(&name, span, VarType::Unknown)
+                })
+                .collect()
+        };
+        let front = piece(self, "front");
+        let back = piece(self, "back");
+        let arguments = (front.iter().chain(&back))
+            .map(|&v| (Value::Array(v), span))
+            .collect();
+        let mut blend = Vec::new();
+        let blended = match self.inline_fn(function, call, span, arguments, &mut blend) {
+            Value::Array(var) if inputs.len() == 1 => vec![var],
+            Value::Tuple(vars) if vars.len() == inputs.len() => vars,
+            Value::Error => return Value::Error,
+            other => {
+                let found = match other {
+                    Value::Tuple(vars) => format!("{} arrays", vars.len()),
+                    Value::Array(_) => "one array".to_string(),
+                    _ => "a host scalar".to_string(),
+                };
+                self.error(
+                    Diagnostic::error(
+                        Code::Composite,
+                        format!(
+                            "the blend `{}` must return {} array{} (one per array composited), found {found}",
+                            blend_name.name,
+                            inputs.len(),
+                            if inputs.len() == 1 { "" } else { "s" }
+                        ),
+                        span,
+                    )
+                    .with_label(function.name.span, "defined here"),
+                );
+                return Value::Error;
+            }
+        };
+        let outputs: Vec<VarId> = (inputs.iter())
+            .map(|&input| {
+                let name = self.vars[input.0 as usize].name.clone();
+                self.new_var(&name, span, VarType::Unknown)
+            })
+            .collect();
+        out.push(Node::Composite(Box::new(Composite {
+            blend_fn: blend_name.name.clone(),
+            inputs,
+            outputs: outputs.clone(),
+            front,
+            back,
+            blend,
+            blended,
+            visibility,
+            span,
+        })));
+        match outputs[..] {
+            [single] => Value::Array(single),
+            _ => Value::Tuple(outputs),
+        }
     }
 
     fn lower_primitive(

@@ -3,6 +3,7 @@
 
 use super::ir::*;
 use crate::functor::FunctorLibrary;
+use crate::host::HostValue;
 use std::fmt::Write;
 
 pub fn plan_to_text(plan: &Plan, library: &FunctorLibrary) -> String {
@@ -126,12 +127,49 @@ impl Printer<'_> {
                     self.line(depth, "}");
                 }
                 Node::Break => self.line(depth, "break"),
+                Node::Composite(composite) => self.composite(composite, depth),
                 Node::Output { name, var } => {
                     let line = format!("out {name} = {}", self.name(*var));
                     self.line(depth, &line);
                 }
             }
         }
+    }
+
+    /// ```text
+    /// composite (color#1, depth#1) = composite<nearestDepth>(color, depth) {   // rank order
+    ///   blend (front.color, front.depth) over (back.color, back.depth) {
+    ///     stage …
+    ///   } → (%40, %41)
+    /// }   // only rank 0 goes on
+    /// ```
+    fn composite(&mut self, composite: &Composite, depth: usize) {
+        let names = |printer: &Self, vars: &[VarId]| {
+            let names: Vec<String> = vars.iter().map(|v| printer.name(*v)).collect();
+            format!("({})", names.join(", "))
+        };
+        let order = match &composite.visibility {
+            HostExpr::Const(HostValue::Bool(false)) => "rank order, ties to the lower rank".into(),
+            HostExpr::Const(HostValue::Bool(true)) => "visibility order".into(),
+            other => format!("visibility order if {}", host_text(other, self.plan)),
+        };
+        let line = format!(
+            "composite {} = composite<{}>{} {{   // front to back in {order}",
+            names(self, &composite.outputs),
+            composite.blend_fn,
+            names(self, &composite.inputs)
+        );
+        self.line(depth, &line);
+        let line = format!(
+            "blend front {} with back {} {{",
+            names(self, &composite.front),
+            names(self, &composite.back)
+        );
+        self.line(depth + 1, &line);
+        self.nodes(&composite.blend, depth + 2);
+        let line = format!("}} → {}", names(self, &composite.blended));
+        self.line(depth + 1, &line);
+        self.line(depth, "}   // only rank 0 runs on from here");
     }
 
     /// `hits = map<intersect>(rays)`

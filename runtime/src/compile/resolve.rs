@@ -2,7 +2,7 @@
 //! entry file's pipeline, every `param` and every `fn`. Duplicates and a
 //! missing pipeline are diagnostics.
 
-use super::ir::{Generator, Primitive};
+use super::ir::{Generator, Primitive, COMPOSITE};
 use super::load::LoadedProgram;
 use dpp_dsl::ast::{FnItem, Item, ParamItem, PipelineItem};
 use dpp_dsl::{Code, Diagnostic, Span};
@@ -10,7 +10,7 @@ use std::collections::HashMap;
 
 /// Whether a `fn`, `param` or binding may not take `name`.
 pub fn is_reserved(name: &str) -> bool {
-    Primitive::from_name(name).is_some() || Generator::from_name(name).is_some()
+    Primitive::from_name(name).is_some() || Generator::from_name(name).is_some() || name == COMPOSITE
 }
 
 pub struct Program<'a> {

@@ -151,8 +151,42 @@ impl Checker<'_> {
                     self.check_nodes(then_body);
                     self.check_nodes(else_body);
                 }
+                Node::Composite(composite) => self.check_composite(composite),
                 Node::Break | Node::Output { .. } | Node::View { .. } => {}
             }
+        }
+    }
+
+    /// The pieces a blend combines have the types of the arrays composited,
+    /// and so must what it returns: the composited image has them too.
+    fn check_composite(&mut self, composite: &Composite) {
+        let span = composite.span;
+        self.expect_host(&composite.visibility, HostType::Bool, span, "`visibility:`");
+        for (index, &input) in composite.inputs.iter().enumerate() {
+            let ty = self.vars[input.0 as usize].ty;
+            self.assign(composite.front[index], ty, None, span);
+            self.assign(composite.back[index], ty, None, span);
+        }
+        self.check_nodes(&composite.blend);
+        for (index, &input) in composite.inputs.iter().enumerate() {
+            let (ty, blended) = (
+                self.vars[input.0 as usize].ty,
+                self.vars[composite.blended[index].0 as usize].ty,
+            );
+            if blended != VarType::Unknown && ty != VarType::Unknown && blended != ty {
+                let message = format!(
+                    "the blend `{}` returns {} as its value number {}, but the array composited there, `{}`, is {}",
+                    composite.blend_fn,
+                    self.type_name(blended),
+                    index + 1,
+                    self.vars[input.0 as usize].name,
+                    self.type_name(ty)
+                );
+                self.diagnostics
+                    .push(Diagnostic::error(Code::Composite, message, span));
+            }
+            let len = self.symbolic_len(input);
+            self.assign(composite.outputs[index], ty, Some(len), span);
         }
     }
 

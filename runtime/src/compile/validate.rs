@@ -106,6 +106,24 @@ impl Validator<'_> {
                 self.block(else_body, &mut else_defined, loop_depth);
                 defined.extend(then_defined.intersection(&else_defined));
             }
+            Node::Composite(composite) => {
+                let mut inside = defined.clone();
+                inside.extend(composite.front.iter().chain(&composite.back));
+                self.block(&composite.blend, &mut inside, 0);
+                self.check_reads("the blend's result", &composite.blended, &inside);
+                let pieces = [
+                    &composite.outputs,
+                    &composite.front,
+                    &composite.back,
+                    &composite.blended,
+                ];
+                if pieces.iter().any(|p| p.len() != composite.inputs.len()) {
+                    self.problem(format!(
+                        "`composite<{}>` has pieces of different arities",
+                        composite.blend_fn
+                    ));
+                }
+            }
             Node::Break if loop_depth == 0 => self.problem("`break` outside a loop".into()),
             _ => {}
         }
@@ -233,6 +251,7 @@ fn node_name(node: &Node) -> &'static str {
         Node::While { .. } => "a `while` loop",
         Node::If { .. } => "an `if`",
         Node::Break => "`break`",
+        Node::Composite(_) => "a `composite`",
         Node::Output { .. } => "an `out`",
     }
 }

@@ -14,7 +14,7 @@ use crate::functor::{CallContext, FunctorLibrary};
 use crate::host::Uniforms;
 use crate::interpret::{
     elementwise_materialised, interpret_observed, Backend, OpHostValues, RunError, RunResult,
-    Slots, StageCall, StageMeasurement, StageObserver,
+    RunHooks, Slots, StageCall, StageMeasurement,
 };
 use crate::types::ElemType;
 use std::any::Any;
@@ -36,14 +36,14 @@ pub struct RunContext<'a> {
 
 /// Runs `plan` on the CPU.
 pub fn run_plan(plan: &Plan, context: &RunContext<'_>) -> Result<RunResult, RunError> {
-    run_plan_observed(plan, context, None)
+    run_plan_observed(plan, context, RunHooks::default())
 }
 
-/// [`run_plan`], telling `observer` of every stage before it runs.
+/// [`run_plan`] with the run's hooks (a stage observer, the other ranks).
 pub fn run_plan_observed(
     plan: &Plan,
     context: &RunContext<'_>,
-    observer: Option<StageObserver<'_>>,
+    hooks: RunHooks<'_>,
 ) -> Result<RunResult, RunError> {
     let mut backend = CpuBackend { context };
     interpret_observed(
@@ -52,7 +52,7 @@ pub fn run_plan_observed(
         context.uniforms,
         &context.library.records,
         Vec::new(),
-        observer,
+        hooks,
     )
 }
 
@@ -90,6 +90,10 @@ impl Backend for CpuBackend<'_> {
 
     fn to_column(&mut self, array: &Arc<Column>) -> Result<Arc<Column>, RunError> {
         Ok(array.clone())
+    }
+
+    fn from_column(&mut self, column: Arc<Column>) -> Result<Arc<Column>, RunError> {
+        Ok(column)
     }
 
     fn release(&mut self, array: Arc<Column>) {

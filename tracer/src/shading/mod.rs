@@ -366,7 +366,9 @@ pub fn default_lights(bounds: &Bounds) -> Vec<PointLight> {
 
 /// The finite scalars' min and max, widened to a unit interval when they are
 /// equal; `[0, 1]` without any.
-fn default_scalar_range(scalars: &[f32]) -> [f32; 2] {
+/// The colour map's default range over `scalars`: their finite extremes,
+/// widened by 0.5 either way around a single value, [0, 1] without any.
+pub fn default_scalar_range(scalars: &[f32]) -> [f32; 2] {
     let (min, max) = scalars
         .iter()
         .filter(|s| s.is_finite())
