@@ -19,14 +19,16 @@ use dpp_runtime::interpret::{Blend, Compositor, RunError};
 use dpp_runtime::{Column, ErrorKind, FunctorLibrary, RecordRegistry};
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
 use dpp_tracer::camera::tile_owner;
+use dpp_tracer::mesh::Bounds;
 use dpp_tracer::partition::{
     assign_pieces, count_triangles, piece_offsets, spatial_part, split_materials, sub_mesh,
 };
 use dpp_tracer::shading::{default_scalar_range, MeshMaterials};
-use dpp_tracer::volume::brick::{global_triangle_ids, kd_bricks, owned_triangles, triangle_summary};
+use dpp_tracer::volume::brick::{
+    global_triangle_ids, kd_bricks, owned_triangles, triangle_summary,
+};
 use dpp_tracer::volume::raw::RawSpec;
 use dpp_tracer::volume::Volume;
-use dpp_tracer::mesh::Bounds;
 use dpp_tracer::{TraceScene, TriangleMesh};
 use glam::UVec3;
 use std::sync::{Arc, Mutex};
@@ -269,7 +271,8 @@ pub fn rank_report(
             let rounds: Vec<String> = (stats.rounds.iter())
                 .map(|r| format!("{:.1}", r.time.as_secs_f64() * 1e3))
                 .collect();
-            let sent = stats.rounds.iter().map(|r| r.bytes_sent).sum::<u64>() + stats.gather.bytes_sent;
+            let sent =
+                stats.rounds.iter().map(|r| r.bytes_sent).sum::<u64>() + stats.gather.bytes_sent;
             (
                 format!("{:.1}", total.as_secs_f64() * 1e3),
                 rounds.join("+"),
@@ -296,7 +299,11 @@ pub fn rank_report(
         "{:>5} {:>11} {:>10} {:>9} {:>16} {:>9} {:>9}",
         "rank", "triangles", "render ms", "comp. ms", "rounds ms", "sent MB", "peak MB"
     )];
-    table.extend(lines.iter().map(|l| String::from_utf8_lossy(l).into_owned()));
+    table.extend(
+        lines
+            .iter()
+            .map(|l| String::from_utf8_lossy(l).into_owned()),
+    );
     table
 }
 
@@ -375,8 +382,16 @@ pub fn load_part(
         // A scene colours by height without scalars of its own.
         None => mesh.positions.iter().map(|p| p.y).collect(),
     };
-    let mut low = [scalars.iter().copied().filter(|s| s.is_finite()).fold(f32::INFINITY, f32::min)];
-    let mut high = [scalars.iter().copied().filter(|s| s.is_finite()).fold(f32::NEG_INFINITY, f32::max)];
+    let mut low = [scalars
+        .iter()
+        .copied()
+        .filter(|s| s.is_finite())
+        .fold(f32::INFINITY, f32::min)];
+    let mut high = [scalars
+        .iter()
+        .copied()
+        .filter(|s| s.is_finite())
+        .fold(f32::NEG_INFINITY, f32::max)];
     distribution.ranks().all_min_f32(&mut low);
     distribution.ranks().all_max_f32(&mut high);
     let scalar_range = default_scalar_range(&[low[0], high[0]]);
@@ -391,10 +406,17 @@ pub fn load_part(
     }
     let triangles = mesh.triangles.len();
     let scene = scene_setup::trace_scene(mesh, materials, progress, |e| {
-        format!("error: the part of {origin} on rank {}: {e}", distribution.rank())
+        format!(
+            "error: the part of {origin} on rank {}: {e}",
+            distribution.rank()
+        )
     })
     .and_then(|scene| {
-        let ids = if ids.len() == triangles { ids } else { vec![0; triangles] };
+        let ids = if ids.len() == triangles {
+            ids
+        } else {
+            vec![0; triangles]
+        };
         scene
             .with_global_ids(Arc::new(ids))
             .map_err(|e| format!("error: {e}"))
@@ -403,7 +425,11 @@ pub fn load_part(
     scene.bounds = bounds;
     Ok(Part {
         scene,
-        origin: format!("{origin}, rank {} of {}", distribution.rank(), distribution.size()),
+        origin: format!(
+            "{origin}, rank {} of {}",
+            distribution.rank(),
+            distribution.size()
+        ),
         scalar_range,
     })
 }
@@ -411,7 +437,10 @@ pub fn load_part(
 /// The whole of a one-file mesh or the built-in scene, with the vertex
 /// normals the single process would compute (on the whole mesh, so that a
 /// vertex on a part's border gets the same normal as in one process).
-fn whole_mesh(spec: &SceneSpec, progress: &Progress) -> Result<(TriangleMesh, MeshMaterials), String> {
+fn whole_mesh(
+    spec: &SceneSpec,
+    progress: &Progress,
+) -> Result<(TriangleMesh, MeshMaterials), String> {
     let (mut mesh, materials) = match spec {
         SceneSpec::Builtin(resolution) => {
             progress.phase("generating the built-in scene");
@@ -541,8 +570,13 @@ fn volume_part(
                 .collect()
         })
         .collect();
-    let ids = global_triangle_ids(&summaries, distribution.rank(), cell_dims, &kept.global_cells)
-        .map_err(|e| format!("error: numbering the isosurface's triangles: {e}"));
+    let ids = global_triangle_ids(
+        &summaries,
+        distribution.rank(),
+        cell_dims,
+        &kept.global_cells,
+    )
+    .map_err(|e| format!("error: numbering the isosurface's triangles: {e}"));
     let ids = distribution.agree(ids)?;
     let mut mesh = sub_mesh(&mesh, &kept.indices);
     // The surface's own values all equal the level: colour by height.

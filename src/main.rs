@@ -423,9 +423,11 @@ impl RunScene {
 fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     // Under mpirun every rank runs this; a failure before the run is agreed
     // by every rank, so that all of them exit with the same error.
-    let distribution =
-        distributed::Distribution::init(args.decompose, args.composite.clone()).map_err(Failure::Run)?;
-    distribution.check_same_command_line().map_err(Failure::Input)?;
+    let distribution = distributed::Distribution::init(args.decompose, args.composite.clone())
+        .map_err(Failure::Run)?;
+    distribution
+        .check_same_command_line()
+        .map_err(Failure::Input)?;
     let compiled = compile(&args.pipeline, library, &args.compile.options());
     let plan = agree_failure(&distribution, compiled)?;
     let pool = agree_failure(&distribution, thread_pool(args.threads))?;
@@ -438,7 +440,12 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     let observe = |stage: &StageStart<'_>| progress.stage(stage);
     let visibility_order = match &scene {
         RunScene::Traced(setup) if distribution.splits_data() => {
-            let mine = setup.resources.scene.mesh.bounds().unwrap_or(setup.resources.scene.bounds);
+            let mine = setup
+                .resources
+                .scene
+                .mesh
+                .bounds()
+                .unwrap_or(setup.resources.scene.bounds);
             distributed::visibility_order(&distribution.every_rank_bounds(mine), setup.camera.eye)
         }
         _ => (0..distribution.size()).collect(),

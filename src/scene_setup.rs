@@ -7,9 +7,9 @@ use crate::progress::Progress;
 use crate::volume_setup::{self, IsoRequest};
 use dpp_runtime::{FunctorLibrary, Uniforms};
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
-use dpp_tracer::volume::generate::Dataset;
-use dpp_tracer::shading::MeshMaterials;
 use dpp_tracer::camera::tile_owner;
+use dpp_tracer::shading::MeshMaterials;
+use dpp_tracer::volume::generate::Dataset;
 use dpp_tracer::{
     Camera, CameraSetup, SceneFile, ShadingOverrides, StandardView, TraceResources, TraceScene,
     TriangleMesh,
@@ -250,10 +250,9 @@ pub fn load_scene(
             let scene = trace_scene(mesh, MeshMaterials::default(), progress, failed)?;
             Ok((scene, "built-in mixing layer".to_string()))
         }
-        [spec] if spec.is_volume(request.raw.as_deref()) => Ok((
-            volume_scene(request, spec, library, progress)?,
-            spec.name(),
-        )),
+        [spec] if spec.is_volume(request.raw.as_deref()) => {
+            Ok((volume_scene(request, spec, library, progress)?, spec.name()))
+        }
         [SceneSpec::File(path)] => {
             progress.phase(format!("loading {}", path.display()));
             let (mesh, materials) = load_mesh(path)?;
@@ -270,9 +269,12 @@ pub fn load_scene(
                 meshes.push(load_mesh(path)?.0);
             }
             let origin = format!("{} pieces", paths.len());
-            let scene = trace_scene(concat_meshes(meshes), MeshMaterials::default(), progress, |e| {
-                format!("error: cannot use the pieces: {e}")
-            })?;
+            let scene = trace_scene(
+                concat_meshes(meshes),
+                MeshMaterials::default(),
+                progress,
+                |e| format!("error: cannot use the pieces: {e}"),
+            )?;
             Ok((scene, origin))
         }
     }

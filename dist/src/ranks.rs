@@ -55,6 +55,19 @@ pub struct Ranks {
 unsafe impl Send for Ranks {}
 unsafe impl Sync for Ranks {}
 
+/// Whether an MPI launcher (`mpirun`, `mpiexec`, `srun`) started this
+/// process. Without one the process is a single rank and does not initialise
+/// MPI at all: Open MPI's "singleton" start forks a daemon and sets up shared
+/// memory, which costs time and fails where a process may not create files
+/// (a file-size limit), for a run that needs none of it.
+#[cfg(feature = "mpi")]
+fn started_by_a_launcher() -> bool {
+    // Open MPI, PMIx (Open MPI 4+, Slurm), and MPICH/Hydra's PMI.
+    ["OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK", "PMI_SIZE"]
+        .iter()
+        .any(|name| std::env::var_os(name).is_some())
+}
+
 impl std::fmt::Debug for Ranks {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "Ranks({} of {})", self.rank, self.size)
@@ -89,14 +102,14 @@ pub fn fnv1a(bytes: &[u8]) -> u64 {
 }
 
 impl Ranks {
-    /// Joins the run. With the `mpi` feature this initialises MPI (a binary
-    /// started without `mpirun` is a single rank of size 1); without it, the
-    /// process is always a single rank. MPI is finalised when the `Ranks` is
+    /// Joins the run. With the `mpi` feature and a launcher (`mpirun`) this
+    /// initialises MPI; a process started without one, or built without the
+    /// feature, is a single rank of size 1 and never touches MPI. MPI is finalised when the `Ranks` is
     /// dropped, so keep it for the whole run; call its methods from one
     /// thread at a time (MPI is initialised for serialised calls).
     pub fn init() -> Result<Ranks, DistError> {
         #[cfg(feature = "mpi")]
-        {
+        if started_by_a_launcher() {
             use mpi::traits::Communicator;
             let (universe, _) = mpi::initialize_with_threading(mpi::Threading::Serialized)
                 .ok_or(DistError::AlreadyInitialised)?;
@@ -104,16 +117,15 @@ impl Ranks {
             // receive of another library sharing the process's MPI.
             let comm = universe.world().duplicate();
             let (rank, size) = (comm.rank() as usize, comm.size() as usize);
-            Ok(Ranks {
+            return Ok(Ranks {
                 comm: Comm::Mpi {
                     comm,
                     _universe: universe,
                 },
                 rank,
                 size,
-            })
+            });
         }
-        #[cfg(not(feature = "mpi"))]
         Ok(Ranks::single())
     }
 

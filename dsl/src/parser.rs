@@ -888,8 +888,10 @@ impl Builder {
             Rule::prefix => self.prefix(pair),
             Rule::postfix => self.postfix(pair),
             Rule::paren if pair.clone().into_inner().count() > 1 => {
-                let elements: Vec<Built> =
-                    pair.into_inner().map(|inner| self.expr_node(inner)).collect();
+                let elements: Vec<Built> = pair
+                    .into_inner()
+                    .map(|inner| self.expr_node(inner))
+                    .collect();
                 let height = elements.iter().map(|e| e.height).max().unwrap_or(0) + 1;
                 Built {
                     expr: Expr {

@@ -13,8 +13,7 @@ use dpp_runtime::column::Column;
 use dpp_runtime::functor::FunctorLibrary;
 use dpp_runtime::host::{HostValue, Uniforms};
 use dpp_runtime::interpret::{
-    interpret_observed, Backend, RunError, RunResult, Slots, StageCall, StageMeasurement,
-    RunHooks,
+    interpret_observed, Backend, RunError, RunHooks, RunResult, Slots, StageCall, StageMeasurement,
 };
 use dpp_runtime::monoid::MonoidOp;
 use dpp_runtime::types::ElemType;
@@ -93,14 +92,7 @@ pub(crate) fn run_plan_gpu_with_inputs(
         failures: Mutex::new(Vec::new()),
         buffers: RunBuffers::new(gpu),
     };
-    let result = interpret_observed(
-        plan,
-        &mut backend,
-        context.uniforms,
-        records,
-        inputs,
-        hooks,
-    )?;
+    let result = interpret_observed(plan, &mut backend, context.uniforms, records, inputs, hooks)?;
     backend.check_status()?;
     Ok(result)
 }

@@ -340,7 +340,14 @@ pub fn interpret_with_inputs<B: Backend>(
     records: &RecordRegistry,
     inputs: Vec<(VarId, B::Array)>,
 ) -> Result<RunResult, RunError> {
-    interpret_observed(plan, backend, uniforms, records, inputs, RunHooks::default())
+    interpret_observed(
+        plan,
+        backend,
+        uniforms,
+        records,
+        inputs,
+        RunHooks::default(),
+    )
 }
 
 /// [`interpret_with_inputs`] with the run's hooks: an observer told of every
@@ -665,9 +672,8 @@ impl<'a, B: Backend> Interpreter<'a, B> {
             let array = self.slots.array(self.plan, input)?.clone();
             fragments.push(self.backend.to_column(&array)?);
         }
-        let mut blend = |front: &[Arc<Column>], back: &[Arc<Column>]| {
-            self.blend(composite, front, back)
-        };
+        let mut blend =
+            |front: &[Arc<Column>], back: &[Arc<Column>]| self.blend(composite, front, back);
         let whole = compositor
             .composite(fragments, visibility, &mut blend)
             .map_err(|e| e.within(format_args!("composite<{}>", composite.blend_fn)))?;

@@ -149,7 +149,6 @@ pub enum EmbreeTest {
     Fast,
 }
 
-
 /// Embree's modes, the engines WORKLOAD1 is compared with.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Engine {
@@ -567,8 +566,9 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         };
         for (view_name, _) in &setup.views {
             let request = scene_request(spec, view_name, args.size, args.iso);
-            let view = SceneSetup::with_scene(scene.clone(), &spec.name(), &request, &Default::default())
-                .map_err(Failure::Input)?;
+            let view =
+                SceneSetup::with_scene(scene.clone(), &spec.name(), &request, &Default::default())
+                    .map_err(Failure::Input)?;
             let rays = u64::from(view.camera.pixels());
             let mut view_result = ViewResult {
                 view: view_name.clone(),
@@ -1080,7 +1080,10 @@ mod tests {
         assert_eq!(SceneSpec::parse("builtin:64"), Ok(SceneSpec::Builtin(64)));
         assert_eq!(
             SceneSpec::parse("rm:128,64,32"),
-            Ok(SceneSpec::Generated(Dataset::RichtmyerMeshkov, [128, 64, 32]))
+            Ok(SceneSpec::Generated(
+                Dataset::RichtmyerMeshkov,
+                [128, 64, 32]
+            ))
         );
         assert_eq!(
             SceneSpec::parse("rm:96"),

@@ -208,10 +208,11 @@ fn the_profile_splits_a_fused_stage_by_op() {
         .lines()
         .position(|l| l.trim_start().starts_with("op ") && l.contains("thread ms"))
         .unwrap_or_else(|| panic!("no op split in:\n{stderr}"));
+    // The first stage's op rows (indented below its line, up to the next stage).
     let ops: Vec<&str> = stderr
         .lines()
         .skip(header + 1)
-        .take_while(|l| !l.starts_with("whole run"))
+        .take_while(|l| l.starts_with("        "))
         .collect();
     // `name  thread-ms  share%`: the name may have spaces (`rays = map<cameraRay>`).
     let rows: Vec<(String, f64)> = ops
@@ -229,7 +230,7 @@ fn the_profile_splits_a_fused_stage_by_op() {
         "hits = map<intersect>",
         "surf = map<surface>",
         "rgb = map<shader>",
-        "image = scatter",
+        "color = scatter",
     ] {
         assert!(names.contains(&name), "{name} not in {names:?}:\n{stderr}");
     }

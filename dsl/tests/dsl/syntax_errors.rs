@@ -67,7 +67,7 @@ cases! {
     only_garbage => "}}}",
     else_without_block => "pipeline p {\n    if x { y = 1 } else\n}",
     bare_call_statement => "pipeline p {\n    map<f>(x)\n}",
-    tuple_expression => "pipeline p {\n    x = (a, b)\n}",
+    tuple_without_closing_parenthesis => "pipeline p {\n    x = (a, b\n}",
     use_without_quotes => "use prelude.dpp\npipeline p { out x = 1 }",
     deep_brackets => format!("param x = {}1{}", "(".repeat(201), ")".repeat(201)),
 }

@@ -1083,7 +1083,9 @@ impl Lowerer<'_, '_> {
             )
         };
         if !self.fn_stack.is_empty() || self.scopes.len() != 1 {
-            self.error(misplaced("must be at the top level of the pipeline, not in a fn, loop or branch"));
+            self.error(misplaced(
+                "must be at the top level of the pipeline, not in a fn, loop or branch",
+            ));
             return Value::Error;
         }
         if let Some(first) = self.composited {
@@ -1110,7 +1112,10 @@ impl Lowerer<'_, '_> {
         let Some(function) = self.program.fns.get(blend_name.name.as_str()).copied() else {
             let mut diagnostic = Diagnostic::error(
                 Code::UnknownName,
-                format!("the blend of `composite` must be a fn of the file; there is no fn `{}`", blend_name.name),
+                format!(
+                    "the blend of `composite` must be a fn of the file; there is no fn `{}`",
+                    blend_name.name
+                ),
                 blend_name.span,
             );
             if let Some(s) = did_you_mean(&blend_name.name, self.program.fns.keys().copied()) {

@@ -10,7 +10,9 @@ use std::collections::HashMap;
 
 /// Whether a `fn`, `param` or binding may not take `name`.
 pub fn is_reserved(name: &str) -> bool {
-    Primitive::from_name(name).is_some() || Generator::from_name(name).is_some() || name == COMPOSITE
+    Primitive::from_name(name).is_some()
+        || Generator::from_name(name).is_some()
+        || name == COMPOSITE
 }
 
 pub struct Program<'a> {

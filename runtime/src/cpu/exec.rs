@@ -13,8 +13,8 @@ use crate::elem::Element;
 use crate::functor::{CallContext, FunctorLibrary};
 use crate::host::Uniforms;
 use crate::interpret::{
-    elementwise_materialised, interpret_observed, Backend, OpHostValues, RunError, RunResult,
-    RunHooks, Slots, StageCall, StageMeasurement,
+    elementwise_materialised, interpret_observed, Backend, OpHostValues, RunError, RunHooks,
+    RunResult, Slots, StageCall, StageMeasurement,
 };
 use crate::types::ElemType;
 use std::any::Any;

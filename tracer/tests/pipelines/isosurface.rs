@@ -93,11 +93,11 @@ fn run_on(volume: &Volume, level: f64, fuse: bool, backend: Backend) -> Run {
         }
     };
     let names: Vec<&str> = result.outputs.iter().map(|(n, _)| n.as_str()).collect();
-    assert_eq!(names, ["triangles", "count"]);
+    assert_eq!(names, ["triangles", "cells", "count"]);
     let OutputValue::Array(triangles) = result.outputs[0].1.clone() else {
         panic!("triangles is an array")
     };
-    let OutputValue::Host(HostValue::Int(count)) = result.outputs[1].1 else {
+    let OutputValue::Host(HostValue::Int(count)) = result.outputs[2].1 else {
         panic!("count is an integer")
     };
     assert_eq!(triangles.len() as i64, count);
