@@ -33,10 +33,26 @@ pub fn stdout(args: fmt::Arguments<'_>) {
     }
 }
 
-/// Writes to stderr (see [`errln!`](crate::errln)), ignoring failures.
+/// Writes to stderr (see [`errln!`](crate::errln)), ignoring failures. The
+/// text goes out in one write, so that the lines of processes sharing the
+/// stream (ranks under mpirun) never interleave within a line.
 pub fn stderr(args: fmt::Arguments<'_>) {
+    let text = args.to_string();
     let mut err = io::stderr().lock();
-    let _ = err.write_fmt(args).and_then(|()| err.flush());
+    let _ = err.write_all(text.as_bytes()).and_then(|()| err.flush());
+}
+
+/// Set on every rank but 0 of a distributed run: the run's final error is
+/// every rank's (agreed), and rank 0 says it once for all.
+static FINAL_ERROR_SILENCED: AtomicBool = AtomicBool::new(false);
+
+/// Leaves the final error to rank 0 (see [`final_error_silenced`]).
+pub fn silence_final_error() {
+    FINAL_ERROR_SILENCED.store(true, Ordering::Relaxed);
+}
+
+pub fn final_error_silenced() -> bool {
+    FINAL_ERROR_SILENCED.load(Ordering::Relaxed)
 }
 
 /// Why stdout could not be written, unless it was only a closed pipe.

@@ -19,6 +19,7 @@ use dpp_runtime::interpret::{Blend, Compositor, RunError};
 use dpp_runtime::{Column, ErrorKind, FunctorLibrary, RecordRegistry};
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
 use dpp_tracer::camera::tile_owner;
+use dpp_tracer::functors::isosurface::{corner_bounds, welded_mesh};
 use dpp_tracer::mesh::Bounds;
 use dpp_tracer::partition::{
     assign_pieces, count_triangles, piece_offsets, spatial_part, split_materials, sub_mesh,
@@ -556,12 +557,33 @@ fn volume_part(
         fuse: request.fuse,
     };
     progress.phase(format!("isosurface at level {level}"));
-    let brick_volume = volume.clone();
-    let surface = volume_setup::isosurface_with_cells(volume, &iso, library);
-    let (mesh, cells) = distribution.agree(surface)?;
-    let kept = owned_triangles(&cells, &brick_volume, &brick);
-    drop(brick_volume);
-    let summary = triangle_summary(&brick, &kept.global_cells);
+    // Where the brick's cells are, for numbering them globally (the samples
+    // themselves go to the pipeline).
+    let placement = Volume {
+        dims: volume.dims,
+        spacing: volume.spacing,
+        origin: volume.origin,
+        first: volume.first,
+        values: Vec::new(),
+    };
+    let surface = volume_setup::isosurface_triangles(volume, &iso, library);
+    let (triangles, cells) = distribution.agree(surface)?;
+    let owned = owned_triangles(&cells, &placement, &brick);
+    // Welded with the box around every rank's corners, as one process welds
+    // the whole surface, so that the same collapsed triangles are dropped.
+    let corners =
+        corner_bounds(&triangles, Some(&owned.indices)).map_err(|e| format!("error: {}", e.0));
+    let (low, high) = distribution.agree(corners)?;
+    let (mut low, mut high) = (low.to_array(), high.to_array());
+    distribution.ranks().all_min_f32(&mut low);
+    distribution.ranks().all_max_f32(&mut high);
+    let welded = welded_mesh(&triangles, Some(&owned.indices), (low.into(), high.into()))
+        .map_err(|e| format!("error: {}", e.0));
+    let (mut mesh, survivors) = distribution.agree(welded)?;
+    let global_cells: Vec<UVec3> = (survivors.iter())
+        .map(|&position| owned.global_cells[position as usize])
+        .collect();
+    let summary = triangle_summary(&brick, &global_cells);
     let bytes: Vec<u8> = summary.iter().flat_map(|w| w.to_le_bytes()).collect();
     let summaries: Vec<Vec<u32>> = (distribution.ranks().all_gather_bytes(&bytes).iter())
         .map(|bytes| {
@@ -570,15 +592,9 @@ fn volume_part(
                 .collect()
         })
         .collect();
-    let ids = global_triangle_ids(
-        &summaries,
-        distribution.rank(),
-        cell_dims,
-        &kept.global_cells,
-    )
-    .map_err(|e| format!("error: numbering the isosurface's triangles: {e}"));
+    let ids = global_triangle_ids(&summaries, distribution.rank(), cell_dims, &global_cells)
+        .map_err(|e| format!("error: numbering the isosurface's triangles: {e}"));
     let ids = distribution.agree(ids)?;
-    let mut mesh = sub_mesh(&mesh, &kept.indices);
     // The surface's own values all equal the level: colour by height.
     mesh.scalars = None;
     Ok((mesh, ids))

@@ -266,14 +266,19 @@ fn main() -> ExitCode {
         Some(failure) => Err(Failure::Run(format!("cannot write to stdout: {failure}"))),
         None => Ok(()),
     });
+    let silenced = console::final_error_silenced();
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(Failure::Input(message)) => {
-            errln!("{message}");
+            if !silenced {
+                errln!("{message}");
+            }
             ExitCode::from(2)
         }
         Err(Failure::Run(message)) => {
-            errln!("error: {message}");
+            if !silenced {
+                errln!("error: {message}");
+            }
             ExitCode::from(1)
         }
     }
@@ -425,6 +430,10 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     // by every rank, so that all of them exit with the same error.
     let distribution = distributed::Distribution::init(args.decompose, args.composite.clone())
         .map_err(Failure::Run)?;
+    if distribution.rank() != 0 {
+        // Errors before the run are agreed: rank 0 reports them for every rank.
+        console::silence_final_error();
+    }
     distribution
         .check_same_command_line()
         .map_err(Failure::Input)?;

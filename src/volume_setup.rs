@@ -79,7 +79,8 @@ pub fn isosurface(
     library: &FunctorLibrary,
 ) -> Result<TriangleMesh, String> {
     let range = volume.value_range();
-    let (mesh, _) = isosurface_with_cells(volume, request, library)?;
+    let (triangles, _) = isosurface_triangles(volume, request, library)?;
+    let mesh = triangles_to_mesh(&triangles, true).map_err(|e| format!("error: {}", e.0))?;
     if mesh.triangles.is_empty() {
         let range = range.map_or("no finite values".to_string(), |(lo, hi)| {
             format!("values {lo} to {hi}")
@@ -92,14 +93,15 @@ pub fn isosurface(
     Ok(mesh)
 }
 
-/// [`isosurface`], without triangles too, and with each triangle's cell (the
-/// pipeline's `cells` output, numbered over `volume`'s own cells): what a
-/// brick of a distributed volume needs to keep its own triangles.
-pub fn isosurface_with_cells(
+/// The isosurface pipeline's `triangles` (Triangle records, none at all
+/// being no error) and each triangle's cell (its `cells` output, numbered
+/// over `volume`'s own cells): what a brick of a distributed volume needs to
+/// keep its own triangles before they are welded.
+pub fn isosurface_triangles(
     volume: Volume,
     request: &IsoRequest,
     library: &FunctorLibrary,
-) -> Result<(TriangleMesh, Vec<u32>), String> {
+) -> Result<(Arc<dpp_runtime::Column>, Vec<u32>), String> {
     if !request.level.is_finite() {
         return Err(format!(
             "error: --iso {} is not a finite level",
@@ -148,8 +150,7 @@ pub fn isosurface_with_cells(
             )
         }
     };
-    let mesh = triangles_to_mesh(&triangles, true).map_err(|e| format!("error: {}", e.0))?;
-    Ok((mesh, cells))
+    Ok((triangles, cells))
 }
 
 /// Colours the mesh by a second field: its value at each vertex, trilinearly

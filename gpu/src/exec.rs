@@ -731,7 +731,7 @@ impl Backend for GpuBackend<'_> {
             .map_err(RunError::from)
     }
 
-    fn from_column(&mut self, column: Arc<Column>) -> Result<GpuArray, RunError> {
+    fn upload(&mut self, column: Arc<Column>) -> Result<GpuArray, RunError> {
         crate::array::upload(self.gpu, &column).map_err(RunError::from)
     }
 }

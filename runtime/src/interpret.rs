@@ -264,7 +264,7 @@ pub trait Backend {
 
     /// A host column as the backend's array: `composite` hands the pieces
     /// other ranks sent to the blend, and the whole image to the rest of the run.
-    fn from_column(&mut self, column: Arc<Column>) -> Result<Self::Array, RunError>;
+    fn upload(&mut self, column: Arc<Column>) -> Result<Self::Array, RunError>;
 
     /// A slot lets go of `array` (it was rebound, or the run ended): a backend
     /// that reuses memory takes it back here; the others drop it.
@@ -681,7 +681,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
             return Ok(false);
         };
         for (&output, column) in composite.outputs.iter().zip(whole) {
-            let array = self.backend.from_column(column)?;
+            let array = self.backend.upload(column)?;
             self.store(output, array);
         }
         Ok(true)
@@ -703,7 +703,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                 )));
             }
             for (&var, piece) in vars.iter().zip(pieces) {
-                let array = self.backend.from_column(piece.clone())?;
+                let array = self.backend.upload(piece.clone())?;
                 self.store(var, array);
             }
         }

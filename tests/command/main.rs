@@ -7,5 +7,7 @@ mod cli;
 mod cli_citizen;
 #[path = "../common/mod.rs"]
 mod common;
+#[cfg(feature = "mpi")]
+mod distributed;
 mod images;
 mod plans;

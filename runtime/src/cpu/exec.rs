@@ -92,7 +92,7 @@ impl Backend for CpuBackend<'_> {
         Ok(array.clone())
     }
 
-    fn from_column(&mut self, column: Arc<Column>) -> Result<Arc<Column>, RunError> {
+    fn upload(&mut self, column: Arc<Column>) -> Result<Arc<Column>, RunError> {
         Ok(column)
     }
 

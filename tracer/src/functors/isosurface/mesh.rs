@@ -60,36 +60,80 @@ impl<'a> TriangleColumns<'a> {
 /// dropped, so triangle `i` of the mesh is then not always triangle `i` of the
 /// output.
 pub fn triangles_to_mesh(triangles: &Column, weld: bool) -> Result<TriangleMesh, NotTriangles> {
+    if weld {
+        let corners = corner_bounds(triangles, None)?;
+        return Ok(welded_mesh(triangles, None, corners)?.0);
+    }
     let view = triangles.view();
     let columns = TriangleColumns::new(&view)?;
     let n = columns.len();
     let mut mesh = TriangleMesh {
-        positions: Vec::with_capacity(if weld { n / 2 + 3 } else { 3 * n }),
+        positions: Vec::with_capacity(3 * n),
+        triangles: Vec::with_capacity(n),
+        normals: Some(Vec::with_capacity(3 * n)),
+        scalars: Some(Vec::with_capacity(3 * n)),
+    };
+    let normals = mesh.normals.as_mut().unwrap();
+    let scalars = mesh.scalars.as_mut().unwrap();
+    for t in 0..n {
+        let first = mesh.positions.len() as u32;
+        for i in 0..3 {
+            mesh.positions.push(columns.corners[i][t]);
+            normals.push(columns.normals[i][t]);
+            scalars.push(columns.scalars[i][t]);
+        }
+        mesh.triangles.push([first, first + 1, first + 2]);
+    }
+    Ok(mesh)
+}
+
+/// The box around the finite corners of the triangles `subset` (all without
+/// one): what the welding quantum is taken from. `(+inf, -inf)` for none.
+pub fn corner_bounds(
+    triangles: &Column,
+    subset: Option<&[u32]>,
+) -> Result<(Vec3, Vec3), NotTriangles> {
+    let view = triangles.view();
+    let columns = TriangleColumns::new(&view)?;
+    let (mut min, mut max) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    let mut visit = |t: usize| {
+        for corner in &columns.corners {
+            let p = corner[t];
+            if p.is_finite() {
+                min = min.min(p);
+                max = max.max(p);
+            }
+        }
+    };
+    match subset {
+        Some(subset) => subset.iter().for_each(|&t| visit(t as usize)),
+        None => (0..columns.len()).for_each(&mut visit),
+    }
+    Ok((min, max))
+}
+
+/// The welded mesh of the triangles `subset` (all without one), in their
+/// order, with the welding quantum taken from `corners`, the box around the
+/// corners of *every* triangle of the surface: a part of a distributed
+/// surface, welded with the whole surface's box, drops exactly the triangles
+/// the whole would (those that collapse). Also the positions in `subset` of
+/// the triangles kept.
+pub fn welded_mesh(
+    triangles: &Column,
+    subset: Option<&[u32]>,
+    (min, max): (Vec3, Vec3),
+) -> Result<(TriangleMesh, Vec<u32>), NotTriangles> {
+    let view = triangles.view();
+    let columns = TriangleColumns::new(&view)?;
+    let n = subset.map_or(columns.len(), <[u32]>::len);
+    let mut mesh = TriangleMesh {
+        positions: Vec::with_capacity(n / 2 + 3),
         triangles: Vec::with_capacity(n),
         normals: Some(Vec::new()),
         scalars: Some(Vec::new()),
     };
     let normals = mesh.normals.as_mut().unwrap();
     let scalars = mesh.scalars.as_mut().unwrap();
-    if !weld {
-        for t in 0..n {
-            let first = mesh.positions.len() as u32;
-            for i in 0..3 {
-                mesh.positions.push(columns.corners[i][t]);
-                normals.push(columns.normals[i][t]);
-                scalars.push(columns.scalars[i][t]);
-            }
-            mesh.triangles.push([first, first + 1, first + 2]);
-        }
-        return Ok(mesh);
-    }
-    let (mut min, mut max) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-    for corner in columns.corners {
-        for p in corner.iter().filter(|p| p.is_finite()) {
-            min = min.min(*p);
-            max = max.max(*p);
-        }
-    }
     let diagonal = if min.cmple(max).all() {
         (max - min).length() as f64
     } else {
@@ -98,7 +142,9 @@ pub fn triangles_to_mesh(triangles: &Column, weld: bool) -> Result<TriangleMesh,
     let quantum = (diagonal / f64::from(1u32 << 20)).max(f64::MIN_POSITIVE);
     let key = |p: Vec3| p.to_array().map(|c| (c as f64 / quantum).round() as i64);
     let mut index: HashMap<[i64; 3], u32> = HashMap::with_capacity(n);
-    for t in 0..n {
+    let mut kept = Vec::with_capacity(n);
+    for position in 0..n {
+        let t = subset.map_or(position, |subset| subset[position] as usize);
         let corners: [u32; 3] = std::array::from_fn(|i| {
             let p = columns.corners[i][t];
             *index.entry(key(p)).or_insert_with(|| {
@@ -111,9 +157,10 @@ pub fn triangles_to_mesh(triangles: &Column, weld: bool) -> Result<TriangleMesh,
         let [a, b, c] = corners;
         if a != b && b != c && c != a {
             mesh.triangles.push(corners);
+            kept.push(position as u32);
         }
     }
-    Ok(mesh)
+    Ok((mesh, kept))
 }
 
 #[cfg(test)]

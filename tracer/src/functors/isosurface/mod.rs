@@ -36,7 +36,7 @@
 
 pub mod mesh;
 
-pub use mesh::{triangles_to_mesh, NotTriangles, TriangleColumns};
+pub use mesh::{corner_bounds, triangles_to_mesh, welded_mesh, NotTriangles, TriangleColumns};
 
 use crate::functors::record_fields_mut;
 use crate::functors::wgsl::buffers::VolumeGpuBuffers;
