@@ -428,8 +428,8 @@ impl RunScene {
 fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     // Under mpirun every rank runs this; a failure before the run is agreed
     // by every rank, so that all of them exit with the same error.
-    let distribution = distributed::Distribution::init(args.decompose, args.composite.clone())
-        .map_err(Failure::Run)?;
+    let distribution =
+        distributed::Distribution::init(args.decompose, args.composite).map_err(Failure::Run)?;
     if distribution.rank() != 0 {
         // Errors before the run are agreed: rank 0 reports them for every rank.
         console::silence_final_error();
