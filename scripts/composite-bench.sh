@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Measures dpp-dist's compositing schedules on 1..8 ranks of this machine
 # (dist/examples/composite_bench.rs) and collects its JSON lines into one
-# file, for dist/examples/cost_fit.rs and docs/benchmarks-across-ranks.md.
+# file, for dist/examples/cost_fit.rs and docs/benchmarks.md ("Across ranks").
 #
 #   scripts/composite-bench.sh [OUT.jsonl]
 #
