@@ -599,3 +599,65 @@ fn volume_part(
     mesh.scalars = None;
     Ok((mesh, ids))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dpp_dist::ranks::fnv1a;
+    use dpp_tracer::volume::kd_bricks;
+    use glam::Vec3;
+
+    /// Boxes of a k-d split come front to back: of two boxes that only one
+    /// axis separates (the pairs where "in front" means something for
+    /// every eye), the one on the eye's side comes first.
+    #[test]
+    fn the_visibility_order_puts_the_eye_s_side_of_every_split_first() {
+        for parts in 1..=9 {
+            let boxes: Vec<Bounds> = kd_bricks(UVec3::new(40, 24, 16), parts)
+                .iter()
+                .map(|brick| Bounds {
+                    min: brick.cells[0].as_vec3(),
+                    max: brick.cells[1].as_vec3(),
+                })
+                .collect();
+            for seed in 0..20u64 {
+                // Eyes all around the grid, from a fixed sequence.
+                let unit = |k: u64| (fnv1a(&(seed * 3 + k).to_le_bytes()) % 1000) as f32 / 1000.0;
+                let eye = Vec3::new(unit(0), unit(1), unit(2)) * 100.0 - Vec3::splat(30.0);
+                let order = visibility_order(&boxes, eye);
+                let mut sorted = order.clone();
+                sorted.sort_unstable();
+                assert_eq!(sorted, (0..parts).collect::<Vec<_>>());
+                let position = |i: usize| order.iter().position(|&r| r == i).unwrap();
+                for a in 0..parts {
+                    for b in 0..parts {
+                        let separated: Vec<usize> = (0..3)
+                            .filter(|&axis| boxes[a].max[axis] <= boxes[b].min[axis])
+                            .collect();
+                        let overlapping = (0..3).all(|axis| {
+                            separated.contains(&axis)
+                                || (boxes[a].max[axis] > boxes[b].min[axis]
+                                    && boxes[b].max[axis] > boxes[a].min[axis])
+                        });
+                        // An eye between the two boxes could face either,
+                        // as the split between them decides: skipped.
+                        let between = |axis: usize| {
+                            boxes[a].max[axis] < eye[axis] && eye[axis] < boxes[b].min[axis]
+                        };
+                        if let (&[axis], true) = (&separated[..], overlapping) {
+                            if between(axis) {
+                                continue;
+                            }
+                            let a_faces_the_eye = eye[axis] <= boxes[a].max[axis];
+                            assert_eq!(
+                                position(a) < position(b),
+                                a_faces_the_eye,
+                                "parts {parts}, eye {eye}, boxes {a} and {b} along axis {axis}: {order:?}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

@@ -703,6 +703,15 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                 )));
             }
             for (&var, piece) in vars.iter().zip(pieces) {
+                let expected = elem_type(self.plan, var);
+                if piece.elem_type() != expected {
+                    return Err(RunError::internal(format!(
+                        "the compositor gave `{}` {} elements where the blend takes {}",
+                        self.plan.var(var).name,
+                        piece.elem_type().name(self.records),
+                        expected.name(self.records)
+                    )));
+                }
                 let array = self.backend.upload(piece.clone())?;
                 self.store(var, array);
             }

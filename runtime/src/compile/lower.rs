@@ -1105,7 +1105,7 @@ impl Lowerer<'_, '_> {
                     "`composite` needs its blend: `composite<blend>(…)`, a fn of the file",
                     span,
                 )
-                .with_help("for opaque surfaces: `composite<nearestDepth>(color, depth)` with `use \"composite.dpp\"`"),
+                .with_help("for opaque surfaces: `composite<nearestDepth>(depth, alpha, color)` with `use \"composite.dpp\"`"),
             );
             return Value::Error;
         };
