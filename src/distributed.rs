@@ -298,7 +298,7 @@ pub fn rank_report(
     }
     let mut table = vec![format!(
         "{:>5} {:>11} {:>10} {:>9} {:>16} {:>9} {:>9}",
-        "rank", "triangles", "render ms", "comp. ms", "rounds ms", "sent MB", "peak MB"
+        "rank", "triangles", "run ms", "comp. ms", "rounds ms", "sent MB", "peak MB"
     )];
     table.extend(
         lines

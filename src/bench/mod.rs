@@ -15,12 +15,16 @@
 //! frames run without it and the stage times come from as many further runs
 //! with it (device time from timestamp queries where the adapter has them).
 
+mod across_ranks;
 mod chart;
 mod report;
 
+use crate::distributed::Distribution;
 use crate::outputs::write_atomically;
 use crate::scene_setup::{self, SceneRequest, SceneSetup, SceneSpec};
 use crate::{volume_setup, Backend, Failure};
+use dpp_dist::schedule::DEFAULT_RADIX;
+use dpp_dist::CompositeSchedule;
 use dpp_gpu::{run_plan_gpu, GpuContext, GpuRunContext};
 use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, RunContext};
@@ -136,6 +140,14 @@ pub struct BenchArgs {
     /// Draw WORKLOAD1's rates (or the frame rates) as a PNG bar chart.
     #[arg(long, value_name = "FILE.png")]
     chart: Option<PathBuf>,
+    /// Under mpirun: each rank holds part of the data (`data`) or renders
+    /// part of the image (`image`); the report is per rank.
+    #[arg(long, value_enum, default_value_t = crate::distributed::Decompose::Data)]
+    decompose: crate::distributed::Decompose,
+    /// Under mpirun: the compositing schedules to measure, comma-separated
+    /// (`direct`, `binary-swap`, `radix-k`, `radix-k:K`).
+    #[arg(long, default_value = "radix-k", value_name = "SCHEDULES")]
+    composite: String,
 }
 
 /// The triangle test of Embree's scene (`--embree-test`).
@@ -494,6 +506,24 @@ pub struct SceneResult {
 }
 
 pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
+    let mut distribution =
+        Distribution::init(args.decompose, CompositeSchedule::RadixK(DEFAULT_RADIX))
+            .map_err(Failure::Run)?;
+    if distribution.size() > 1 {
+        if distribution.rank() != 0 {
+            crate::console::silence_final_error();
+        }
+        distribution
+            .check_same_command_line()
+            .map_err(Failure::Input)?;
+        let setup = crate::agree_failure(&distribution, check(&args).map_err(Failure::Input))?;
+        if setup.embree || args.backend != Backend::Cpu {
+            return Err(Failure::Input(
+                "error: across ranks dpp bench runs the CPU backend's engine only (no --engine embree, no --backend gpu)".into(),
+            ));
+        }
+        return across_ranks::bench_across_ranks(&args, &setup, library, &mut distribution);
+    }
     let setup = check(&args).map_err(Failure::Input)?;
     let pool = crate::thread_pool(args.threads)?;
     let threads = pool.current_num_threads();

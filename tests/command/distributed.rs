@@ -40,6 +40,7 @@ fn pipeline(name: &str) -> String {
 struct Outcome {
     what: String,
     code: Option<i32>,
+    stdout: String,
     stderr: String,
     elapsed: Duration,
 }
@@ -97,6 +98,7 @@ fn run_with_deadline(mut command: Command, dir: &Path, what: String) -> Outcome 
     Outcome {
         what,
         code: status.code(),
+        stdout: std::fs::read_to_string(&out_path).unwrap(),
         stderr: std::fs::read_to_string(&err_path).unwrap(),
         elapsed: start.elapsed(),
     }
@@ -631,4 +633,55 @@ fn ranks_given_different_command_lines_fail_the_run() {
     let second = ["run", &w1, "sphere:24", "--size", "64x64", "-o", "out.png"];
     let outcome = mpirun_mpmd(dir.path(), &[(1, &first), (1, &second)]);
     check_failure(dir.path(), outcome, "command line differs");
+}
+
+/// `dpp bench` under mpirun reports every rank of every measurement: for
+/// each view, workload and schedule asked for, one row per rank with its
+/// triangles (which add up to the whole scene's), times, bytes and memory.
+#[test]
+fn bench_across_ranks_reports_every_rank_of_every_schedule() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "bench",
+        "sphere:24",
+        "--size",
+        "64x48",
+        "--views",
+        "front,back",
+        "--workloads",
+        "1,2",
+        "--warmup",
+        "0",
+        "--rounds",
+        "1",
+        "--composite",
+        "direct,binary-swap",
+    ];
+    let outcome = mpirun(dir.path(), 3, &args).success();
+    let whole = single_triangle_count(dir.path(), &["sphere:24"]);
+    let tables: Vec<&str> = outcome.stdout.split("```").skip(1).step_by(2).collect();
+    assert_eq!(tables.len(), 2 * 2 * 2, "{}", outcome.stdout);
+    for table in tables {
+        let rows: Vec<Vec<&str>> = (table.lines())
+            .filter(|l| l.trim_start().starts_with(|c: char| c.is_ascii_digit()))
+            .map(|l| l.split_whitespace().collect())
+            .collect();
+        assert_eq!(rows.len(), 3, "{table}");
+        let triangles: usize = rows
+            .iter()
+            .map(|row| row[1].parse::<usize>().unwrap())
+            .sum();
+        assert_eq!(triangles, whole, "{table}");
+        for row in &rows {
+            let run_ms: f64 = row[2].parse().unwrap();
+            assert!(run_ms > 0.0, "{table}");
+        }
+    }
+    for heading in ["front, WORKLOAD1, direct", "back, WORKLOAD2, binary-swap"] {
+        assert!(
+            outcome.stdout.contains(heading),
+            "{heading}:\n{}",
+            outcome.stdout
+        );
+    }
 }
