@@ -685,3 +685,94 @@ fn bench_across_ranks_reports_every_rank_of_every_schedule() {
         );
     }
 }
+
+/// A square of side `2 * half` at depth `z`, facing +z, as OBJ text.
+fn square_obj(half: f32, z: f32) -> String {
+    let corners = [[-half, -half], [half, -half], [half, half], [-half, half]];
+    let mut text = String::new();
+    for [x, y] in corners {
+        writeln!(text, "v {x} {y} {z}").unwrap();
+    }
+    text.push_str("f 1 2 3\nf 1 3 4\n");
+    text
+}
+
+/// Translucent surfaces on two ranks are blended front to back in
+/// visibility order, whichever rank holds the front one: the image is the
+/// front piece's own image "over" the back piece's, pixel by pixel, bit for
+/// bit (the blend does the same operations in the same order as here).
+#[test]
+fn translucent_pieces_blend_front_to_back_in_visibility_order() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("front.obj"), square_obj(0.5, 0.0)).unwrap();
+    std::fs::write(dir.path().join("back.obj"), square_obj(1.0, -1.0)).unwrap();
+    let translucent = pipeline("examples/translucent.dpp");
+    // A camera, light and colour map that do not depend on the scene's bounds.
+    let fixed = [
+        "--eye",
+        "0,0,5",
+        "--look-at",
+        "0,0,0",
+        "--light",
+        "0.3,0.6,10,1",
+        "--scalar-range",
+        "-2,2",
+        "--set",
+        "falloff=0",
+        "--size",
+        "32x32",
+    ];
+    let render = |pieces: &[&str], ranks: Option<usize>, tag: &str| -> (Vec<f32>, Vec<f32>) {
+        let (color, alpha) = (format!("color={tag}-c.npy"), format!("alpha={tag}-a.npy"));
+        let mut args = vec!["run", translucent.as_str()];
+        args.extend_from_slice(pieces);
+        args.extend_from_slice(&fixed);
+        args.extend_from_slice(&["--out", &color, "--out", &alpha, "-o", "t.png"]);
+        match ranks {
+            None => single(dir.path(), &args).success(),
+            Some(ranks) => mpirun(dir.path(), ranks, &args).success(),
+        };
+        let read = |name: String| read_npy::<f32>(&dir.path().join(name));
+        (read(format!("{tag}-c.npy")), read(format!("{tag}-a.npy")))
+    };
+    let (front_color, front_alpha) = render(&["front.obj"], None, "front");
+    let (back_color, back_alpha) = render(&["back.obj"], None, "back");
+    let over = |color: &[f32], alpha: &[f32], back: &[f32]| -> Vec<u32> {
+        (0..color.len())
+            .map(|i| (color[i] + (1.0 - alpha[i]) * back[i]).to_bits())
+            .collect()
+    };
+    let expected_color = over(&front_color, &front_alpha, &back_color);
+    let expected_alpha = over(&front_alpha, &front_alpha, &back_alpha);
+    // Not vacuous: both cover some pixels, and there the order matters.
+    let wrong_order = over(&back_color, &back_alpha, &front_color);
+    let both = (0..front_alpha.len())
+        .filter(|&i| front_alpha[i] > 0.0 && back_alpha[i] > 0.0)
+        .count();
+    let order_matters = (0..expected_color.len())
+        .filter(|&i| expected_color[i] != wrong_order[i])
+        .count();
+    assert!(both > 0 && order_matters > 0, "{both} {order_matters}");
+    for (pieces, tag) in [
+        (["front.obj", "back.obj"], "in-order"),
+        (["back.obj", "front.obj"], "reversed"),
+    ] {
+        let (color, alpha) = render(&pieces, Some(2), tag);
+        let differing = |values: &[f32], expected: &[u32]| {
+            assert_eq!(values.len(), expected.len(), "{tag}");
+            (values.iter().zip(expected))
+                .filter(|(v, e)| v.to_bits() != **e)
+                .count()
+        };
+        assert_eq!(
+            differing(&color, &expected_color),
+            0,
+            "{tag}: colour components differ"
+        );
+        assert_eq!(
+            differing(&alpha, &expected_alpha),
+            0,
+            "{tag}: coverage components differ"
+        );
+    }
+}
