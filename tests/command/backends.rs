@@ -63,7 +63,7 @@ fn comparison(name: &str) -> Option<Comparison> {
             prim: true,
             exact: vec![],
         },
-        "workload2" | "workload3" => Comparison {
+        "workload2" | "workload3" | "examples.translucent" => Comparison {
             args: scene(&[]),
             image: true,
             prim: false,
