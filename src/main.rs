@@ -266,20 +266,16 @@ fn main() -> ExitCode {
         Some(failure) => Err(Failure::Run(format!("cannot write to stdout: {failure}"))),
         None => Ok(()),
     });
-    let silenced = console::final_error_silenced();
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(Failure::Input(message)) => {
-            if !silenced {
-                errln!("{message}");
+        Err(failure) => {
+            if !console::final_error_silenced() {
+                report(&failure);
             }
-            ExitCode::from(2)
-        }
-        Err(Failure::Run(message)) => {
-            if !silenced {
-                errln!("error: {message}");
-            }
-            ExitCode::from(1)
+            ExitCode::from(match failure {
+                Failure::Input(_) => 2,
+                Failure::Run(_) => 1,
+            })
         }
     }
 }
@@ -430,10 +426,41 @@ fn run(args: RunArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     // by every rank, so that all of them exit with the same error.
     let distribution =
         distributed::Distribution::init(args.decompose, args.composite).map_err(Failure::Run)?;
-    if distribution.rank() != 0 {
-        // Errors before the run are agreed: rank 0 reports them for every rank.
+    let result = run_on(args, library, &distribution);
+    distributed_end(&distribution, result)
+}
+
+/// The end of a command on every rank: rank 0 says the error, if any (every
+/// rank has it: failures are agreed, or end the whole run), before any rank
+/// exits, since mpirun ends the job as soon as one rank exits with an error.
+fn distributed_end(
+    distribution: &distributed::Distribution,
+    result: Result<(), Failure>,
+) -> Result<(), Failure> {
+    if distribution.size() > 1 {
+        match &result {
+            Err(failure) if distribution.rank() == 0 => report(failure),
+            _ => {}
+        }
         console::silence_final_error();
+        distribution.ranks().barrier();
     }
+    result
+}
+
+/// Says what went wrong on stderr.
+fn report(failure: &Failure) {
+    match failure {
+        Failure::Input(message) => errln!("{message}"),
+        Failure::Run(message) => errln!("error: {message}"),
+    }
+}
+
+fn run_on(
+    args: RunArgs,
+    library: &FunctorLibrary,
+    distribution: &distributed::Distribution,
+) -> Result<(), Failure> {
     distribution
         .check_same_command_line()
         .map_err(Failure::Input)?;

@@ -510,19 +510,20 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         Distribution::init(args.decompose, CompositeSchedule::RadixK(DEFAULT_RADIX))
             .map_err(Failure::Run)?;
     if distribution.size() > 1 {
-        if distribution.rank() != 0 {
-            crate::console::silence_final_error();
-        }
-        distribution
-            .check_same_command_line()
-            .map_err(Failure::Input)?;
-        let setup = crate::agree_failure(&distribution, check(&args).map_err(Failure::Input))?;
-        if setup.embree || args.backend != Backend::Cpu {
-            return Err(Failure::Input(
-                "error: across ranks dpp bench runs the CPU backend's engine only (no --engine embree, no --backend gpu)".into(),
-            ));
-        }
-        return across_ranks::bench_across_ranks(&args, &setup, library, &mut distribution);
+        let mut across = || {
+            distribution
+                .check_same_command_line()
+                .map_err(Failure::Input)?;
+            let setup = crate::agree_failure(&distribution, check(&args).map_err(Failure::Input))?;
+            if setup.embree || args.backend != Backend::Cpu {
+                return Err(Failure::Input(
+                    "error: across ranks dpp bench runs the CPU backend's engine only (no --engine embree, no --backend gpu)".into(),
+                ));
+            }
+            across_ranks::bench_across_ranks(&args, &setup, library, &mut distribution)
+        };
+        let result = across();
+        return crate::distributed_end(&distribution, result);
     }
     let setup = check(&args).map_err(Failure::Input)?;
     let pool = crate::thread_pool(args.threads)?;

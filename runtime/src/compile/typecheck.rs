@@ -162,10 +162,13 @@ impl Checker<'_> {
     fn check_composite(&mut self, composite: &Composite) {
         let span = composite.span;
         self.expect_host(&composite.visibility, HostType::Bool, span, "`visibility:`");
+        // Both pieces are ranges of the same pixels: one length for all their
+        // arrays, so that the blend's maps fuse into one stage.
+        let piece_len = composite.front.first().map(|&front| HostExpr::Len(front));
         for (index, &input) in composite.inputs.iter().enumerate() {
             let ty = self.vars[input.0 as usize].ty;
-            self.assign(composite.front[index], ty, None, span);
-            self.assign(composite.back[index], ty, None, span);
+            self.assign(composite.front[index], ty, piece_len.clone(), span);
+            self.assign(composite.back[index], ty, piece_len.clone(), span);
         }
         self.check_nodes(&composite.blend);
         for (index, &input) in composite.inputs.iter().enumerate() {
