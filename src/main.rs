@@ -465,13 +465,13 @@ fn run_on(
         .check_same_command_line()
         .map_err(Failure::Input)?;
     let compiled = compile(&args.pipeline, library, &args.compile.options());
-    let plan = agree_failure(&distribution, compiled)?;
-    let pool = agree_failure(&distribution, thread_pool(args.threads))?;
+    let plan = agree_failure(distribution, compiled)?;
+    let pool = agree_failure(distribution, thread_pool(args.threads))?;
 
     let is_root = distribution.rank() == 0;
     let progress = progress::Progress::on_terminal(args.quiet || !is_root);
     let setup_start = Instant::now();
-    let scene = run_scene(&args, &plan, library, &progress, &distribution)?;
+    let scene = run_scene(&args, &plan, library, &progress, distribution)?;
     let setup_time = setup_start.elapsed();
     let observe = |stage: &StageStart<'_>| progress.stage(stage);
     let visibility_order = match &scene {
@@ -508,7 +508,7 @@ fn run_on(
             progress.phase(format!("running {}", plan.pipeline));
             let run_start = Instant::now();
             let result = pool.install(|| run_plan_observed(&plan, &context, hooks));
-            (ended(&distribution, result)?, run_start.elapsed())
+            (ended(distribution, result)?, run_start.elapsed())
         }
         Backend::Gpu => {
             progress.phase("opening the GPU");
@@ -524,7 +524,7 @@ fn run_on(
             progress.phase(format!("running {} on the GPU", plan.pipeline));
             let run_start = Instant::now();
             let result = pool.install(|| run_plan_gpu_observed(&plan, &context, hooks));
-            (ended(&distribution, result)?, run_start.elapsed())
+            (ended(distribution, result)?, run_start.elapsed())
         }
     };
 
@@ -534,7 +534,7 @@ fn run_on(
             RunScene::Volume(_) => 0,
         };
         let stats = compositor.as_ref().and_then(|c| c.stats());
-        let table = distributed::rank_report(&distribution, triangles, run_time, stats.as_ref());
+        let table = distributed::rank_report(distribution, triangles, run_time, stats.as_ref());
         if !table.is_empty() {
             err!("{}\n", table.join("\n"));
         }
