@@ -535,21 +535,14 @@ fn volume_part(
         brick.cells[0],
         brick.cells[1]
     ));
+    let failed = |e: dpp_tracer::volume::VolumeError| format!("error: {e}");
     let volume = match spec {
-        SceneSpec::Generated(dataset, _) => dataset.generate_brick(dims, &brick),
-        SceneSpec::File(path) => Volume::load_brick(path, raw, &brick),
-        SceneSpec::Builtin(_) => unreachable!("checked above"),
-    }
-    .map_err(|e| format!("error: {e}"));
-    let volume = distribution.agree(volume)?;
-    let level = match (request.iso, spec) {
-        (Some(level), _) => Ok(level),
-        (None, SceneSpec::Generated(dataset, _)) => Ok(dataset.default_level()),
-        (None, _) => Err(format!(
-            "error: `{}` is a volume: give the isosurface level with --iso LEVEL",
-            spec.name()
-        )),
+        SceneSpec::Generated(dataset, _) => dataset.generate_brick(dims, &brick).map_err(failed),
+        SceneSpec::File(path) => Volume::load_brick(path, raw, &brick).map_err(failed),
+        SceneSpec::Builtin(_) => Err("error: the built-in scene is not a volume".into()),
     };
+    let volume = distribution.agree(volume)?;
+    let level = scene_setup::iso_level(request, spec, None);
     let level = distribution.agree(level)?;
     let iso = IsoRequest {
         level,

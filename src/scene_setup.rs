@@ -152,27 +152,7 @@ impl SceneSetup {
         progress: &Progress,
         distribution: &Distribution,
     ) -> Result<SceneSetup, String> {
-        if distribution.splits_data() {
-            let part = distributed::load_part(request, library, progress, distribution)?;
-            let share = RankShare {
-                scalar_range: Some(part.scalar_range),
-                traced_tiles: None,
-            };
-            let origin = part.origin;
-            return distribution.agree(SceneSetup::with_scene(
-                Arc::new(part.scene),
-                &origin,
-                request,
-                &share,
-            ));
-        }
-        let share = RankShare {
-            scalar_range: None,
-            traced_tiles: (distribution.size() > 1)
-                .then(|| (distribution.rank(), distribution.size())),
-        };
-        let loaded = load_scene(request, library, progress);
-        let (scene, origin) = distribution.agree(loaded)?;
+        let (scene, origin, share) = load_share(request, library, progress, distribution)?;
         distribution.agree(SceneSetup::with_scene(
             Arc::new(scene),
             &origin,
@@ -226,6 +206,53 @@ impl SceneSetup {
             camera,
             description,
         })
+    }
+}
+
+/// This rank's scene (all of it, or only its part under data decomposition),
+/// where it came from, and what its share changes in the set-up.
+pub fn load_share(
+    request: &SceneRequest,
+    library: &FunctorLibrary,
+    progress: &Progress,
+    distribution: &Distribution,
+) -> Result<(TraceScene, String, RankShare), String> {
+    if distribution.splits_data() {
+        let part = distributed::load_part(request, library, progress, distribution)?;
+        let share = RankShare {
+            scalar_range: Some(part.scalar_range),
+            traced_tiles: None,
+        };
+        return Ok((part.scene, part.origin, share));
+    }
+    let share = RankShare {
+        scalar_range: None,
+        traced_tiles: (distribution.size() > 1).then(|| (distribution.rank(), distribution.size())),
+    };
+    let loaded = load_scene(request, library, progress);
+    let (scene, origin) = distribution.agree(loaded)?;
+    Ok((scene, origin, share))
+}
+
+/// The isosurface level of a volume scene: `--iso`, else a generated data
+/// set's own; `range` (the volume's values, where known) helps choose one.
+pub fn iso_level(
+    request: &SceneRequest,
+    spec: &SceneSpec,
+    range: Option<(f32, f32)>,
+) -> Result<f32, String> {
+    match (request.iso, spec) {
+        (Some(level), _) => Ok(level),
+        (None, SceneSpec::Generated(dataset, _)) => Ok(dataset.default_level()),
+        (None, _) => {
+            let range = range.map_or(String::new(), |(lo, hi)| {
+                format!(" (its values run from {lo} to {hi})")
+            });
+            Err(format!(
+                "error: `{}` is a volume: give the isosurface level with --iso LEVEL{range}",
+                spec.name()
+            ))
+        }
     }
 }
 
@@ -389,19 +416,7 @@ pub fn volume_scene(
         }
         SceneSpec::Builtin(_) => return Err("error: the built-in scene is not a volume".into()),
     };
-    let level = match (request.iso, spec) {
-        (Some(level), _) => level,
-        (None, SceneSpec::Generated(dataset, _)) => dataset.default_level(),
-        (None, _) => {
-            let range = volume.value_range().map_or(String::new(), |(lo, hi)| {
-                format!(" (its values run from {lo} to {hi})")
-            });
-            return Err(format!(
-                "error: `{}` is a volume: give the isosurface level with --iso LEVEL{range}",
-                spec.name()
-            ));
-        }
-    };
+    let level = iso_level(request, spec, volume.value_range())?;
     let iso = IsoRequest {
         level,
         pipeline: request.iso_pipeline.clone(),

@@ -8,7 +8,7 @@
 
 use super::{compile, scene_request, BenchArgs, Setup};
 use crate::distributed::{self, Decompose, Distribution};
-use crate::scene_setup::{load_scene, RankShare, SceneSetup};
+use crate::scene_setup::{load_share, SceneSetup};
 use crate::Failure;
 use dpp_dist::CompositeSchedule;
 use dpp_runtime::cpu::column_pool::ColumnPool;
@@ -62,23 +62,8 @@ pub fn bench_across_ranks(
         let (first_view, _) = &setup.views[0];
         let request = scene_request(spec, first_view, args.size, args.iso);
         let start = Instant::now();
-        let (scene, origin, share) = if distribution.splits_data() {
-            let part = distributed::load_part(&request, library, &progress, distribution)
-                .map_err(Failure::Input)?;
-            let share = RankShare {
-                scalar_range: Some(part.scalar_range),
-                traced_tiles: None,
-            };
-            (part.scene, part.origin, share)
-        } else {
-            let loaded = load_scene(&request, library, &progress);
-            let (scene, origin) = distribution.agree(loaded).map_err(Failure::Input)?;
-            let share = RankShare {
-                scalar_range: None,
-                traced_tiles: Some((distribution.rank(), distribution.size())),
-            };
-            (scene, origin, share)
-        };
+        let (scene, origin, share) =
+            load_share(&request, library, &progress, distribution).map_err(Failure::Input)?;
         let load = start.elapsed();
         let scene = Arc::new(scene);
         let triangles = scene.mesh.triangles.len();
