@@ -234,6 +234,17 @@ fn workload1_on_a_volume_matches_one_process() {
     workload1_on_every_rank_count(dir.path(), &["rm:40"]);
 }
 
+/// Volume files are read brick by brick: each rank seeks to its own rows of
+/// an uncompressed NIfTI file, or streams a gzipped one up to its brick.
+#[test]
+fn workload1_on_volume_files_read_by_brick_matches_one_process() {
+    let dir = tempfile::tempdir().unwrap();
+    for file in ["rm.nii", "rm.nii.gz"] {
+        single(dir.path(), &["gen", "rm", "--grid", "33,29,25", "-o", file]).success();
+        workload1_on_every_rank_count(dir.path(), &[file, "--iso", "128"]);
+    }
+}
+
 /// A UV sphere as (vertices, triangles): `stacks` ≥ 2 bands, `slices` around.
 fn uv_sphere(
     centre: [f32; 3],
