@@ -20,6 +20,14 @@ use std::sync::Arc;
 
 const CHILD: &str = "DPP_DIST_MPI_CHILD";
 
+/// What a child prints, with its rank, when its test ran to the end.
+const FINISHED: &str = "mpirun child finished on rank";
+
+/// One line in one write, so that other ranks' output cannot split it.
+fn finished(rank: usize) {
+    println!("{FINISHED} {rank}");
+}
+
 fn in_child() -> bool {
     std::env::var_os(CHILD).is_some()
 }
@@ -46,9 +54,15 @@ fn mpirun(ranks: usize, test: &str) {
         "{test} on {ranks} ranks: {} (124: timed out)\n--- stdout\n{stdout}\n--- stderr\n{stderr}",
         output.status
     );
-    // The harness's own line, once per rank: the test ran, not filtered away.
+    // Every rank's own line: the test ran to its end there, not filtered
+    // away. (The harness's summary cannot be counted: the ranks' output
+    // interleaves mid-line.)
+    let finished: std::collections::BTreeSet<&str> = (stdout.lines())
+        .filter_map(|line| line.split(FINISHED).nth(1))
+        .map(str::trim)
+        .collect();
     assert_eq!(
-        stdout.matches("test result: ok. 1 passed").count(),
+        finished.len(),
         ranks,
         "{test} on {ranks} ranks did not run everywhere:\n{stdout}"
     );
@@ -286,6 +300,7 @@ fn child_composite() {
     } else {
         assert!(image.is_none());
     }
+    finished(me);
 }
 
 fn schedule_rounds(schedule: &CompositeSchedule, p: usize, n: usize, order: &[usize]) -> usize {
@@ -404,4 +419,5 @@ fn child_agree() {
         }
     }
     assert_eq!(ranks.all_sum_u64(1), p as u64);
+    finished(me);
 }
