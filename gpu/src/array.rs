@@ -2,11 +2,11 @@
 //! on the CPU), each field split into segments no longer than the adapter's
 //! largest storage binding. Every element of a field is `words` 32-bit words.
 
+use crate::caches::BufferPool;
 use crate::device::{GpuContext, GpuError};
 use dpp_runtime::column::Column;
 use dpp_runtime::types::{ElemType, RecordRegistry};
 use glam::{Vec2, Vec3, Vec4};
-use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 /// One primitive-typed column on the device.
@@ -26,44 +26,6 @@ impl Drop for Field {
         if let Some(run) = &self.pool {
             let mut released = run.released.lock().unwrap_or_else(|e| e.into_inner());
             released.append(&mut self.buffers);
-        }
-    }
-}
-
-/// Buffers of the arrays of finished runs, by size, for the next arrays of
-/// that size. Every run allocates its arrays anew, and new device memory is
-/// slow to get (the driver clears it: on an H100 a frame that allocated
-/// 80 MB took about 40 ms longer than one that allocated 16 MB); a reused
-/// buffer is cleared on the device instead.
-#[derive(Debug, Default)]
-pub struct BufferPool {
-    free: Mutex<PoolState>,
-}
-
-#[derive(Debug, Default)]
-struct PoolState {
-    by_size: HashMap<u64, Vec<wgpu::Buffer>>,
-    bytes: u64,
-}
-
-/// The most memory the pool keeps; buffers beyond it are freed.
-const POOL_MAX_BYTES: u64 = 1 << 30;
-
-impl BufferPool {
-    fn take(&self, size: u64) -> Option<wgpu::Buffer> {
-        let mut state = self.free.lock().unwrap_or_else(|e| e.into_inner());
-        let buffer = state.by_size.get_mut(&size)?.pop()?;
-        state.bytes -= size;
-        Some(buffer)
-    }
-
-    fn give(&self, buffers: Vec<wgpu::Buffer>) {
-        let mut state = self.free.lock().unwrap_or_else(|e| e.into_inner());
-        for buffer in buffers {
-            if state.bytes + buffer.size() <= POOL_MAX_BYTES {
-                state.bytes += buffer.size();
-                state.by_size.entry(buffer.size()).or_default().push(buffer);
-            }
         }
     }
 }

@@ -99,11 +99,11 @@ pub struct GpuContext {
     /// Whether compute passes can write timestamps (per-stage device time).
     pub timestamps: bool,
     /// Compiled kernels by source text, kept across runs.
-    pub(crate) pipelines: crate::exec::PipelineCache,
+    pub(crate) pipelines: crate::caches::PipelineCache,
     /// Scene buffers by name and data, uploaded once.
-    pub(crate) scene_buffers: crate::exec::SceneBufferCache,
+    pub(crate) scene_buffers: crate::caches::SceneBufferCache,
     /// Buffers of dropped arrays, for the next arrays of the same size.
-    pub(crate) buffer_pool: std::sync::Arc<crate::array::BufferPool>,
+    pub(crate) buffer_pool: std::sync::Arc<crate::caches::BufferPool>,
 }
 
 impl fmt::Debug for GpuContext {

@@ -5,6 +5,7 @@
 //! the outputs, and (when profiling) the end of every stage.
 
 use crate::array::{allocate_array, download, download_words, wait, GpuArray, RunBuffers};
+use crate::backend::GpuBackend;
 use crate::device::{GpuContext, GpuError};
 use crate::monoid;
 use crate::shader::{Access, Binding, ShaderBuilder, WORKGROUP};
@@ -17,9 +18,8 @@ use dpp_runtime::interpret::{
 };
 use dpp_runtime::monoid::MonoidOp;
 use dpp_runtime::types::ElemType;
-use dpp_runtime::wgsl::{host_type_wgsl, record_structs, GpuBuffer};
+use dpp_runtime::wgsl::{host_type_wgsl, record_structs};
 use std::any::Any;
-use std::collections::HashMap;
 use std::fmt::Write;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -160,22 +160,6 @@ fn uniform_layout(context: &GpuRunContext<'_>) -> (Vec<u32>, String) {
     (words, accessors)
 }
 
-pub struct GpuBackend<'a> {
-    pub gpu: &'a GpuContext,
-    pub library: &'a FunctorLibrary,
-    pub resources: &'a (dyn Any + Send + Sync),
-    profile: bool,
-    /// Record structs and uniform accessors: the start of every shader.
-    prelude: String,
-    uniforms: wgpu::Buffer,
-    status: wgpu::Buffer,
-    /// Failure messages; code `n` is entry `n - 1`. `{a}`, `{b}` are filled
-    /// from the status words.
-    failures: Mutex<Vec<String>>,
-    /// Where the run's arrays leave their buffers for later runs.
-    pub(crate) buffers: Arc<RunBuffers>,
-}
-
 /// A kernel ready to dispatch over `threads` invocations.
 struct Dispatch {
     source: String,
@@ -185,58 +169,6 @@ struct Dispatch {
 }
 
 impl GpuBackend<'_> {
-    /// The code of a failure message (the same message, the same code, so a
-    /// stage's shader text does not change between runs).
-    pub fn failure(&self, message: &str) -> u32 {
-        let mut failures = self.failures.lock().expect("failure table");
-        let index = match failures.iter().position(|m| m == message) {
-            Some(index) => index,
-            None => {
-                failures.push(message.to_string());
-                failures.len() - 1
-            }
-        };
-        index as u32 + 1
-    }
-
-    /// The device copy of a scene buffer, uploaded once per context.
-    pub fn scene_buffer(&self, buffer: &GpuBuffer) -> Result<wgpu::Buffer, RunError> {
-        let bytes = (buffer.data.len() * 4) as u64;
-        if bytes > self.gpu.limits.device_max_binding_bytes {
-            return Err(RunError::resource_limit(format!(
-                "scene buffer `{}` has {bytes} bytes, above the adapter `{}`'s largest storage binding ({} bytes)",
-                buffer.name,
-                self.gpu.adapter_name(),
-                self.gpu.limits.device_max_binding_bytes
-            )));
-        }
-        let key = (
-            buffer.name,
-            Arc::as_ptr(&buffer.data) as *const u32 as usize,
-        );
-        let mut cache = self.gpu.scene_buffers.lock().expect("scene buffer cache");
-        if let Some((data, device_buffer)) = cache.get(&key) {
-            if Arc::ptr_eq(data, &buffer.data) {
-                return Ok(device_buffer.clone());
-            }
-        }
-        let mut contents: &[u32] = &buffer.data;
-        let placeholder = [0u32];
-        if contents.is_empty() {
-            contents = &placeholder;
-        }
-        let device_buffer = self
-            .gpu
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(buffer.name),
-                contents: bytemuck::cast_slice(contents),
-                usage: wgpu::BufferUsages::STORAGE,
-            });
-        cache.insert(key, (buffer.data.clone(), device_buffer.clone()));
-        Ok(device_buffer)
-    }
-
     fn builder(&self) -> ShaderBuilder<'_> {
         ShaderBuilder::new(&self.library.records, &self.status, &self.uniforms)
     }
@@ -749,8 +681,3 @@ fn element_to_host(column: &Column) -> HostValue {
         Column::Record { .. } => unreachable!("reductions are over primitives"),
     }
 }
-
-/// The caches a context keeps across runs.
-pub type PipelineCache =
-    Mutex<HashMap<String, Arc<(wgpu::ComputePipeline, wgpu::BindGroupLayout)>>>;
-pub type SceneBufferCache = Mutex<HashMap<(&'static str, usize), (Arc<[u32]>, wgpu::Buffer)>>;

@@ -6,6 +6,8 @@
 
 pub mod agreement;
 pub mod array;
+mod backend;
+mod caches;
 mod device;
 mod exec;
 mod functor_call;

@@ -7,7 +7,7 @@
 //! (see `exec.rs`).
 
 use crate::array::{allocate_array, copy_array, GpuArray};
-use crate::exec::GpuBackend;
+use crate::backend::GpuBackend;
 use crate::monoid;
 use crate::shader::{Access, ShaderBuilder};
 use dpp_runtime::compile::ir::*;
