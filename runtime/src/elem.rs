@@ -150,6 +150,16 @@ macro_rules! with_element_type {
             $ty, [U32, I32, F32], $T => $body, $other => $otherwise
         )
     };
+    ($ty:expr, float, $T:ident => $body:expr, $other:pat => $otherwise:expr) => {
+        $crate::elem::with_element_type!(
+            $ty, [F32, Vec2, Vec3, Vec4], $T => $body, $other => $otherwise
+        )
+    };
+    ($ty:expr, vector, $T:ident => $body:expr, $other:pat => $otherwise:expr) => {
+        $crate::elem::with_element_type!(
+            $ty, [Vec2, Vec3, Vec4], $T => $body, $other => $otherwise
+        )
+    };
     ($ty:expr, scalar_or_bool, $T:ident => $body:expr, $other:pat => $otherwise:expr) => {
         $crate::elem::with_element_type!(
             $ty, [Bool, U32, I32, F32], $T => $body, $other => $otherwise

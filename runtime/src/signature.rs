@@ -47,6 +47,12 @@ pub enum TypeConstraint {
     Scalar,
     /// `u32`, `i32`.
     Integer,
+    /// `i32`, `f32`, `vec2`, `vec3`, `vec4`: the numeric types with a negation.
+    Signed,
+    /// `f32`, `vec2`, `vec3`, `vec4`.
+    Float,
+    /// `vec2`, `vec3`, `vec4`.
+    Vector,
     /// `bool`, `u32`, `i32`, `f32`.
     ScalarOrBool,
     /// Every primitive element type (no records).
@@ -60,6 +66,11 @@ impl TypeConstraint {
             TypeConstraint::Numeric => ty.is_numeric(),
             TypeConstraint::Scalar => matches!(ty, ElemType::U32 | ElemType::I32 | ElemType::F32),
             TypeConstraint::Integer => ty.is_integer(),
+            TypeConstraint::Signed => ty.is_numeric() && ty != ElemType::U32,
+            TypeConstraint::Float => ty.is_numeric() && !ty.is_integer(),
+            TypeConstraint::Vector => {
+                matches!(ty, ElemType::Vec2 | ElemType::Vec3 | ElemType::Vec4)
+            }
             TypeConstraint::ScalarOrBool => matches!(
                 ty,
                 ElemType::Bool | ElemType::U32 | ElemType::I32 | ElemType::F32
@@ -74,6 +85,9 @@ impl TypeConstraint {
             TypeConstraint::Numeric => "numeric",
             TypeConstraint::Scalar => "u32|i32|f32",
             TypeConstraint::Integer => "u32|i32",
+            TypeConstraint::Signed => "i32|f32|vec2|vec3|vec4",
+            TypeConstraint::Float => "f32|vec2|vec3|vec4",
+            TypeConstraint::Vector => "vec2|vec3|vec4",
             TypeConstraint::ScalarOrBool => "bool|u32|i32|f32",
             TypeConstraint::Primitive => "primitive",
         }

@@ -8,8 +8,9 @@
 //! A twin defines one function named [`WgslRequest::function`] (any helper it
 //! needs is named `{function}_…` or lives in a shared [`WgslModule`]). Named
 //! arguments always come last, in signature order, typed by [`host_type_wgsl`]
-//! (`int` is `i32`, `float` is `f32`). Array values are typed by
-//! [`elem_type_wgsl`]: `bool`, `u32`, `i32`, `f32`, `vec2<f32>`, `vec3<f32>`,
+//! (`int` is `i32`, `float` is `f32`), named as in the signature or, where the
+//! convention has taken the name, `arg_{name}` ([`named_parameter_wgsl`]).
+//! Array values are typed by [`elem_type_wgsl`]: `bool`, `u32`, `i32`, `f32`, `vec2<f32>`, `vec3<f32>`,
 //! `vec4<f32>`, and records as structs of the same name and fields (`Ray`).
 //!
 //! - `Map`: `fn F(index: u32, in0: T0, …, named…) -> Out` — `index` is the
@@ -217,7 +218,26 @@ pub fn twin_parameters(
         }
     }
     for named in &signature.named {
-        params.push((named.name.to_string(), host_type_wgsl(named.ty).to_string()));
+        let name = named_parameter_wgsl(signature, named.name);
+        params.push((name, host_type_wgsl(named.ty).to_string()));
     }
     params
+}
+
+/// The WGSL name of the named argument `name` of `signature`: `name`, or
+/// `arg_{name}` where the calling convention has a parameter of that name
+/// already (`component(v, index: 1)` is a map, whose first parameter is
+/// `index`).
+pub fn named_parameter_wgsl(signature: &Signature, name: &str) -> String {
+    let taken = match signature.kind {
+        FunctorKind::Map => &["index"][..],
+        FunctorKind::Group => &["first", "k"][..],
+        FunctorKind::Expand => &["source_index", "src", "lane", "k"][..],
+        FunctorKind::Monoid(_) => &["a", "b"][..],
+    };
+    let taken = taken.contains(&name) || signature.inputs.iter().any(|p| p.name == name);
+    match taken {
+        true => format!("arg_{name}"),
+        false => name.to_string(),
+    }
 }

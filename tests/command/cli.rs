@@ -275,7 +275,14 @@ fn exit_statuses_and_messages() {
         &["functors"],
         &[],
         0,
-        &["intersect(ray: Ray) -> (hit: Hit)", "camera.pixels: int"],
+        &[
+            "intersect(ray: Ray) -> (hit: Hit)",
+            "camera.pixels: int",
+            "reflectRay(surf: Surface) -> (ray: Ray) [maxDepth: int = 3]",
+            "reflect(i: T0:vec2|vec3|vec4, n: T0:vec2|vec3|vec4) -> (out: T0:vec2|vec3|vec4)",
+            "component(v: T0:vec2|vec3|vec4) -> (out: f32) [index: int]",
+            "vec3(x: f32, y: f32, z: f32) -> (out: vec3)",
+        ],
     );
     check(
         &["plan", &w1, "--format", "json"],

@@ -18,6 +18,7 @@ use dpp_runtime::interpret::OutputValue;
 use dpp_runtime::interpret::{RunError, RunResult};
 use dpp_runtime::*;
 use glam::{Vec2, Vec3, Vec4};
+use std::f32::consts::PI;
 use std::fmt::Write;
 use std::path::Path;
 use std::sync::Arc;
@@ -47,6 +48,9 @@ const INTEGER: &[Ty] = &[Ty::U32, Ty::I32];
 const SCALAR: &[Ty] = &[Ty::U32, Ty::I32, Ty::F32];
 const SCALAR_OR_BOOL: &[Ty] = &[Ty::Bool, Ty::U32, Ty::I32, Ty::F32];
 const FLOATS: &[Ty] = &[Ty::F32, Ty::V2, Ty::V3, Ty::V4];
+const VECTORS: &[Ty] = &[Ty::V2, Ty::V3, Ty::V4];
+const SIGNED: &[Ty] = &[Ty::I32, Ty::F32, Ty::V2, Ty::V3, Ty::V4];
+const F32: &[Ty] = &[Ty::F32];
 const INTEGER_OR_VECTOR: &[Ty] = &[Ty::U32, Ty::I32, Ty::V2, Ty::V3, Ty::V4];
 const NUMERIC: &[Ty] = &[Ty::U32, Ty::I32, Ty::F32, Ty::V2, Ty::V3, Ty::V4];
 const ANY: &[Ty] = &[
@@ -95,9 +99,15 @@ enum Values {
     Any,
     /// [`Values::Any`] without integer zeros (divisors).
     NonZero,
-    /// [`Values::Any`] with float divisors where WGSL bounds the error of `/`:
-    /// `|b|` in `[2^-126, 2^126]`, or `±0`, `±inf`, NaN (others become 3).
-    Divisor,
+    /// [`Values::Any`] with floats where WGSL bounds the error of `/` (as
+    /// divisors) and of `log`: `|x|` in `[2^-126, 2^126]`, or `±0`, `±inf`,
+    /// NaN (others become 3).
+    Bounded,
+    /// Floats in `[-π, π]`: where WGSL bounds the error of `sin` and `cos`;
+    /// exponents whose powers of [`Values::Positive`] stay normal.
+    Small,
+    /// Positive normal floats of magnitude 2^-40 .. 2^40, where WGSL's `pow` is defined.
+    Positive,
     /// [`Values::NonZero`] with a zero as the last element.
     ZeroAtEnd,
     /// Floats that are multiples of 1/4 of magnitude at most 256 (and `-0`):
@@ -149,6 +159,8 @@ const fn typed(name: &'static str, ty: Ty, values: Values) -> Input {
 
 const A: Input = input("a", Values::Any);
 const B: Input = input("b", Values::Any);
+const C: Input = input("c", Values::Any);
+const D: Input = input("d", Values::Any);
 const COND: Input = typed("cond", Ty::Bool, Values::Any);
 const GROUPED: Input = Input {
     len: Len::Nk,
@@ -227,7 +239,7 @@ const ELEMENTWISE: &[Case] = &[
         "integer division truncates on both; i32::MIN / -1 wraps"),
     case("div", INTEGER, &[A, input("b", Values::ZeroAtEnd)], "map<div>(a, b)",
         Fails("division by zero"), "an integer division by zero is a run-time error"),
-    case("div", FLOATS, &[A, input("b", Values::Divisor)], "map<div>(a, b)", ulp(3),
+    case("div", FLOATS, &[A, input("b", Values::Bounded)], "map<div>(a, b)", ulp(3),
         "WGSL's / is within 2.5 ULP for |b| in [2^-126, 2^126], the CPU's correctly rounded"),
     case("eq", SCALAR_OR_BOOL, &[A, B], "map<eq>(a, b)", EXACT, "exact; NaN is unequal"),
     case("ne", SCALAR_OR_BOOL, &[A, B], "map<ne>(a, b)", EXACT, "exact; NaN is unequal"),
@@ -245,6 +257,77 @@ const ELEMENTWISE: &[Case] = &[
     case("identity", ANY, &[A], "map<identity>(a)", BITS, MOVE),
     case("hash", U32, &[A], "map<hash>(a)", EXACT, "integer arithmetic, wrapping on both"),
     case("random", U32, &[A], "map<random>(a)", EXACT, "24 bits times 2^-24, exact on both"),
+];
+
+const EXACT_ON_LAVAPIPE: &str =
+    "+ - * / and sqrt are correctly rounded on lavapipe, which fuses no \
+    multiply-add here; a GPU that fuses (WGSL allows it) may differ (docs/language.md §7)";
+
+/// The maths of element-wise expressions (`runtime/src/generic/math.rs`).
+#[rustfmt::skip]
+const MATH: &[Case] = &[
+    case("neg", SIGNED, &[A], "map<neg>(a)", BITS, "the sign bit flipped; i32 wraps on both"),
+    case("abs", FLOATS, &[A], "map<abs>(a)", BITS, "the sign bit cleared"),
+    case("floor", FLOATS, &[A], "map<floor>(a)", EXACT, "exact in WGSL"),
+    case("ceil", FLOATS, &[A], "map<ceil>(a)", EXACT, "exact in WGSL"),
+    case("fract", FLOATS, &[A], "map<fract>(a)", EXACT, "x - floor(x): both exact"),
+    case("sqrt", FLOATS, &[A], "map<sqrt>(a)", EXACT, EXACT_ON_LAVAPIPE),
+    case("rsqrt", FLOATS, &[A], "map<rsqrt>(a)", ulp(2),
+        "WGSL's inverseSqrt is within 2 ULP (0 measured on lavapipe)"),
+    case("exp", FLOATS, &[A], "map<exp>(a)",
+        Expect::Agree(Tolerance::Relative { rel: 181.0 / 8_388_608.0, abs: f32::MIN_POSITIVE }),
+        "WGSL's exp is within 3 + 2|x| ULP (|x| < 89 where it is finite and normal); \
+         lavapipe flushes results below the normal range to 0"),
+    case("log", FLOATS, &[input("a", Values::Bounded)], "map<log>(a)",
+        Expect::Agree(Tolerance::Relative { rel: 3.0 / 8_388_608.0, abs: 1.0 / 2_097_152.0 }),
+        "WGSL's log: 2^-21 absolute in [0.5, 2], 3 ULP elsewhere, for normal x"),
+    case("sin", FLOATS, &[input("a", Values::Small)], "map<sin>(a)",
+        Expect::Agree(Tolerance::Relative { rel: 0.0, abs: 1.0 / 2048.0 }),
+        "WGSL's sin is within 2^-11 absolute in [-π, π] (1 ULP measured on lavapipe)"),
+    case("cos", FLOATS, &[input("a", Values::Small)], "map<cos>(a)",
+        Expect::Agree(Tolerance::Relative { rel: 0.0, abs: 1.0 / 2048.0 }),
+        "WGSL's cos is within 2^-11 absolute in [-π, π] (1 ULP measured on lavapipe)"),
+    case("pow", FLOATS, &[input("a", Values::Positive), input("b", Values::Small)], "map<pow>(a, b)",
+        Expect::Agree(Tolerance::Relative { rel: 4e-5, abs: f32::MIN_POSITIVE }),
+        "WGSL's pow is exp2(b log2 a), defined for a > 0: within 3 + 2|b log2 a| ULP of exp2 \
+         and log2's error times b (6.1e-6 measured on lavapipe, which flushes results below the \
+         normal range to 0)"),
+    case("clamp", FLOATS, &[A, B, C], "map<clamp>(a, b, c)", ZERO_SIGN, NAN_LOSES),
+    case("mix", FLOATS, &[A, B, C], "map<mix>(a, b, c)", EXACT, EXACT_ON_LAVAPIPE),
+    case("step", FLOATS, &[A, B], "map<step>(a, b)", EXACT, "a comparison; NaN gives 0 on both"),
+    case("smoothstep", FLOATS, &[A, B, C], "map<smoothstep>(a, b, c)", EXACT, EXACT_ON_LAVAPIPE),
+    case("dot", VECTORS, &[A, B], "map<dot>(a, b)", EXACT, EXACT_ON_LAVAPIPE),
+    case("cross", &[Ty::V3], &[A, B], "map<cross>(a, b)", EXACT, EXACT_ON_LAVAPIPE),
+    case("length", VECTORS, &[A], "map<length>(a)", EXACT, EXACT_ON_LAVAPIPE),
+    case("distance", VECTORS, &[A, B], "map<distance>(a, b)", EXACT, EXACT_ON_LAVAPIPE),
+    case("normalize", VECTORS, &[A], "map<normalize>(a)", EXACT, EXACT_ON_LAVAPIPE),
+    case("reflect", VECTORS, &[A, B], "map<reflect>(a, b)", EXACT, EXACT_ON_LAVAPIPE),
+    case("vec2", F32, &[A, B], "map<vec2>(a, b)", BITS, MOVE),
+    case("vec3", F32, &[A, B, C], "map<vec3>(a, b, c)", BITS, MOVE),
+    case("vec4", F32, &[A, B, C, D], "map<vec4>(a, b, c, d)", BITS, MOVE),
+    case("splat2", F32, &[A], "map<splat2>(a)", BITS, MOVE),
+    case("splat3", F32, &[A], "map<splat3>(a)", BITS, MOVE),
+    case("splat4", F32, &[A], "map<splat4>(a)", BITS, MOVE),
+    case("component", &[Ty::V2], &[A],
+        "out x = map<component>(a, index: 0)
+         out y = map<component>(a, index: 1)", BITS, MOVE),
+    case("component", &[Ty::V3], &[A],
+        "out x = map<component>(a, index: 0)
+         out y = map<component>(a, index: 1)
+         out z = map<component>(a, index: 2)", BITS, MOVE),
+    case("component", &[Ty::V4], &[A],
+        "out x = map<component>(a, index: 0)
+         out w = map<component>(a, index: 3)", BITS, MOVE),
+    case("component", &[Ty::V3], &[A], "map<component>(a, index: 3)",
+        Fails("out of range for vec3"), "an index beyond the vector is a run-time error"),
+    case("component", VECTORS, &[A], "map<component>(a, index: -1)",
+        Fails("out of range"), "a negative index is a run-time error"),
+    case("rem", INTEGER, &[A, input("b", Values::NonZero)], "map<rem>(a, b)", EXACT,
+        "integer remainders are exact; i32::MIN % -1 is 0 on both"),
+    case("rem", INTEGER, &[A, input("b", Values::ZeroAtEnd)], "map<rem>(a, b)",
+        Fails("division by zero"), "an integer remainder by zero is a run-time error"),
+    case("rem", F32, &[A, input("b", Values::Bounded)], "map<rem>(a, b)", EXACT,
+        "a - b * trunc(a / b) on both; a GPU whose / is not correctly rounded may differ by b"),
 ];
 
 /// `hash` and `random` with the named argument `seed`, taken modulo 2^32:
@@ -534,6 +617,12 @@ fn f32s(n: usize, role: usize, component: usize, values: Values, rng: &mut Split
             Values::Products if rng.chance(4096) => rng.pick(&[0.0, -0.0]),
             Values::Products if rng.chance(8) => rng.pick(&[2.0, -2.0, 0.5, -0.5]),
             Values::Products => rng.pick(&[1.0, -1.0]),
+            Values::Small if i < 4 => [0.0, -0.0, PI, -PI][i],
+            Values::Small => (rng.below(1 << 24) as f32 / (1 << 23) as f32 - 1.0) * PI,
+            Values::Positive => match random_f32(rng).abs() {
+                0.0 => 1.0,
+                x => x,
+            },
             _ => {
                 let x = match edge_index(i + component, role, edges.len(), rng) {
                     Some(e) => edges[e],
@@ -544,7 +633,7 @@ fn f32s(n: usize, role: usize, component: usize, values: Values, rng: &mut Split
                     (2f32.powi(-126)..=2f32.powi(126)).contains(&magnitude)
                 };
                 match values {
-                    Values::Divisor if !bounded => 3.0,
+                    Values::Bounded if !bounded => 3.0,
                     _ => x,
                 }
             }
@@ -902,6 +991,11 @@ fn elementwise_functors_agree() {
 }
 
 #[test]
+fn math_functors_agree() {
+    check_table(MATH);
+}
+
+#[test]
 fn monoids_agree_in_reductions_scans_and_combining_scatters() {
     check_table(MONOIDS);
 }
@@ -956,7 +1050,7 @@ fn integer_arguments_beyond_32_bits_are_an_error_on_the_gpu() {
 #[test]
 fn every_generic_functor_and_type_has_a_case() {
     let setup = setup();
-    let tables = [ELEMENTWISE, NAMED, MONOIDS, GROUPED_CASES];
+    let tables = [ELEMENTWISE, MATH, NAMED, MONOIDS, GROUPED_CASES];
     for functor in crate::common::library().iter() {
         let signature = functor.signature();
         let variables: Vec<TypeConstraint> = signature

@@ -149,25 +149,33 @@ pub(super) fn functors() -> Vec<Arc<dyn Functor>> {
 }
 
 /// A `map` signature with inputs `a` and `b` of type `ty` (its output still to add).
-fn binary(name: &'static str, ty: TypePattern) -> Signature {
+pub(super) fn binary(name: &'static str, ty: TypePattern) -> Signature {
     Signature::map(name).input("a", ty).input("b", ty)
 }
 
 /// A `map` signature from `x: input` to `out: output`.
-fn unary(name: &'static str, input: TypePattern, output: impl Into<TypePattern>) -> Signature {
+pub(super) fn unary(
+    name: &'static str,
+    input: TypePattern,
+    output: impl Into<TypePattern>,
+) -> Signature {
     Signature::map(name).input("x", input).output("out", output)
 }
 
-fn map_with<T: Copy, U: PrimitiveElement>(values: &[T], f: impl Fn(T) -> U) -> Column {
+pub(super) fn map_with<T: Copy, U: PrimitiveElement>(values: &[T], f: impl Fn(T) -> U) -> Column {
     U::into_column(values.iter().map(|&x| f(x)).collect())
 }
 
-fn zip_with<T: Copy, U: PrimitiveElement>(a: &[T], b: &[T], f: impl Fn(T, T) -> U) -> Column {
+pub(super) fn zip_with<T: Copy, U: PrimitiveElement>(
+    a: &[T],
+    b: &[T],
+    f: impl Fn(T, T) -> U,
+) -> Column {
     U::into_column(a.iter().zip(b).map(|(&x, &y)| f(x, y)).collect())
 }
 
 /// The inputs `a` and `b` of a binary functor, of the same type and length.
-fn operands<'a, T: PrimitiveElement>(
+pub(super) fn operands<'a, T: PrimitiveElement>(
     inputs: &[ColumnView<'a>],
 ) -> Result<(&'a [T], &'a [T]), FunctorError> {
     let (a, b) = (typed_slice::<T>(&inputs[0])?, typed_slice::<T>(&inputs[1])?);
@@ -233,16 +241,27 @@ fn numeric_twin(request: &WgslRequest<'_>, body: Body) -> Result<Body, FunctorEr
 fn divide(ctx: &CallContext<'_>, inputs: &[ColumnView<'_>]) -> Result<Column, FunctorError> {
     with_element_type!(inputs[0].elem_type(), numeric, T => {
         let (a, b) = operands::<T>(inputs)?;
-        let quotients = a.iter().zip(b).enumerate().map(|(position, (&x, &y))| {
-            x.divide(y).ok_or_else(|| {
-                FunctorError::bad_input(format!(
-                    "{DIVISION_BY_ZERO} at element {}",
-                    ctx.first_index + position
-                ))
-            })
-        });
-        Ok(T::into_column(quotients.collect::<Result<_, _>>()?))
+        dividing(ctx, a, b, T::divide)
     }, other => Err(unexpected_type(other)))
+}
+
+/// `divide(a, b)` element by element, where `None` is a division by zero
+/// (an error naming the element): `div`'s and `rem`'s kernels.
+pub(super) fn dividing<T: PrimitiveElement>(
+    ctx: &CallContext<'_>,
+    a: &[T],
+    b: &[T],
+    divide: impl Fn(T, T) -> Option<T>,
+) -> Result<Column, FunctorError> {
+    let results = a.iter().zip(b).enumerate().map(|(position, (&x, &y))| {
+        divide(x, y).ok_or_else(|| {
+            FunctorError::bad_input(format!(
+                "{DIVISION_BY_ZERO} at element {}",
+                ctx.first_index + position
+            ))
+        })
+    });
+    Ok(T::into_column(results.collect::<Result<_, _>>()?))
 }
 
 /// WGSL's `i32::MIN / -1` is `i32::MIN`, as `wrapping_div`; a division by
@@ -257,7 +276,7 @@ fn divide_twin(request: &WgslRequest<'_>) -> Result<Body, FunctorError> {
     }
 }
 
-const DIVISION_BY_ZERO: &str = "integer division by zero";
+pub(super) const DIVISION_BY_ZERO: &str = "integer division by zero";
 
 #[derive(Clone, Copy)]
 enum Comparison {

@@ -1,10 +1,12 @@
 //! The generic functors the language requires beside the ray-tracing ones
 //! (docs/language.md §9): arithmetic monoids, comparisons, conversions, `select`, `hash`
 //! and `random`, group reductions and fan-out, so that pipelines other than
-//! ray tracing (a histogram, a stream compaction, a prefix sum) can be written.
+//! ray tracing (a histogram, a stream compaction, a prefix sum) can be written;
+//! and the maths of element-wise expressions (`math.rs`).
 
 mod elementwise;
 mod grouped;
+mod math;
 
 use crate::column::{Column, ColumnView};
 use crate::functor::{CallContext, Functor, FunctorError, FunctorLibrary};
@@ -22,6 +24,7 @@ pub fn register_generic_functors(library: &mut FunctorLibrary) {
         .into_iter()
         .chain(elementwise::functors())
         .chain(grouped::functors())
+        .chain(math::functors())
     {
         library.register(functor);
     }
@@ -179,15 +182,30 @@ fn float_bits_type(ty: ElemType) -> Option<&'static str> {
 /// float comparison could be optimised out.
 fn is_nan(value: &str, ty: ElemType) -> Option<String> {
     let bits = float_bits_type(ty)?;
-    // Vectors splat the masks; a scalar needs no constructor.
-    let constant = |word: &str| match ty {
-        ElemType::F32 => word.to_string(),
-        _ => format!("{bits}({word})"),
-    };
     Some(format!(
         "((bitcast<{bits}>({value}) & {}) > {})",
-        constant("0x7fffffffu"),
-        constant("0x7f800000u")
+        bits_constant(ty, "0x7fffffffu")?,
+        bits_constant(ty, "0x7f800000u")?
+    ))
+}
+
+/// The u32 literal `word` in the bits type of the float type `ty`: splat
+/// for vectors, as it is for a scalar.
+fn bits_constant(ty: ElemType, word: &str) -> Option<String> {
+    Some(match (ty, float_bits_type(ty)?) {
+        (ElemType::F32, _) => word.to_string(),
+        (_, bits) => format!("{bits}({word})"),
+    })
+}
+
+/// `min(a, b)` (`better` is `<`) or `max(a, b)` (`>`) of the float type
+/// `ty` as a WGSL expression that agrees with Rust's `f32::min`/`max` per
+/// component: NaN loses, `a` on a tie. `a` and `b` are names (each is read
+/// several times).
+fn nan_ignoring_wgsl(better: &str, a: &str, b: &str, ty: ElemType) -> Option<String> {
+    let (a_nan, b_nan) = (is_nan(a, ty)?, is_nan(b, ty)?);
+    Some(format!(
+        "select(select(select({a}, {b}, {b} {better} {a}), {a}, {b_nan}), {b}, {a_nan})"
     ))
 }
 
@@ -284,11 +302,11 @@ pub fn monoid_statements(op: MonoidOp, ty: ElemType) -> Option<String> {
         MonoidOp::And if ty == ElemType::Bool => return Some("return a && b;".into()),
         _ => return None,
     };
-    match (ty, is_nan("a", ty), is_nan("b", ty)) {
-        (ElemType::U32 | ElemType::I32, _, _) => Some(format!("return {name}(a, b);")),
-        (_, Some(a_nan), Some(b_nan)) => Some(format!(
-            "return select(select(select(a, b, b {better} a), a, {b_nan}), b, {a_nan});"
+    match ty {
+        ElemType::U32 | ElemType::I32 => Some(format!("return {name}(a, b);")),
+        _ => Some(format!(
+            "return {};",
+            nan_ignoring_wgsl(better, "a", "b", ty)?
         )),
-        _ => None,
     }
 }

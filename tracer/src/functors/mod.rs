@@ -30,7 +30,7 @@ pub mod isosurface;
 pub mod normal_color;
 pub mod occ_ray_gen;
 pub mod occluded;
-pub mod reflect;
+pub mod reflect_ray;
 pub mod shader;
 pub mod shadow_ray;
 pub mod surface;

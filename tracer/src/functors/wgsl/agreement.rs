@@ -882,7 +882,7 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
             .collect(),
     );
     let rgb = curved.make("shader", &[&surfaces, &occlusion, &mask], &[], 1);
-    let bounce = curved.make("reflect", &[&surfaces], &[], 1);
+    let bounce = curved.make("reflectRay", &[&surfaces], &[], 1);
     let bounce_hits = curved.make("intersect", &[&bounce], &[], 1);
     let bounce_surfaces = curved.make("surface", &[&bounce, &bounce_hits], &[], 1);
     let hit_ratio = |hits: &Column| {
@@ -1004,7 +1004,7 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
         ] {
             cases.push(agree(
                 curved,
-                "reflect",
+                "reflectRay",
                 &format!("surfaces of {what}, maxDepth {max_depth}"),
                 &[surfaces],
                 &[int(max_depth)],
@@ -1078,7 +1078,7 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
     for max_depth in [3, 0, i64::from(i32::MAX)] {
         cases.push(agree(
             curved,
-            "reflect",
+            "reflectRay",
             &format!("synthetic surfaces, maxDepth {max_depth}"),
             &[&synthetic],
             &[int(max_depth)],
@@ -1098,7 +1098,7 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
             "shader",
             &[&unknown_material, &no_occlusion, &one_light][..],
         ),
-        ("reflect", &[&unknown_material][..]),
+        ("reflectRay", &[&unknown_material][..]),
     ] {
         cases.push(fails(
             curved,

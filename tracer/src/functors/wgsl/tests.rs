@@ -43,7 +43,7 @@ const TWINS: [(&str, Reads); 16] = [
     ("shadowRay", Reads::Scene),
     ("occRayGen", Reads::Nothing),
     ("visibleLights", Reads::Nothing),
-    ("reflect", Reads::Scene),
+    ("reflectRay", Reads::Scene),
     ("alive", Reads::Nothing),
     ("antiAlias", Reads::Nothing),
     ("globalId", Reads::Scene),

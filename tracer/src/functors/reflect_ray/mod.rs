@@ -1,4 +1,4 @@
-//! `reflect(surf: Surface) -> (ray: Ray) [maxDepth: int = 3]`: the mirror
+//! `reflectRay(surf: Surface) -> (ray: Ray) [maxDepth: int = 3]`: the mirror
 //! reflection ray of a hit whose material reflects.
 //!
 //! Where the material's reflectivity is above 0 and `surf.depth + 1 < maxDepth`,
@@ -24,14 +24,14 @@ use dpp_runtime::{
 };
 use glam::Vec3;
 
-pub struct Reflect {
+pub struct ReflectRay {
     signature: Signature,
 }
 
-impl Reflect {
-    pub fn new(surface: RecordId, ray: RecordId) -> Reflect {
-        Reflect {
-            signature: Signature::map("reflect")
+impl ReflectRay {
+    pub fn new(surface: RecordId, ray: RecordId) -> ReflectRay {
+        ReflectRay {
+            signature: Signature::map("reflectRay")
                 .input("surf", ElemType::Record(surface))
                 .output("ray", ElemType::Record(ray))
                 .named(
@@ -45,7 +45,7 @@ impl Reflect {
     }
 }
 
-impl Functor for Reflect {
+impl Functor for ReflectRay {
     fn signature(&self) -> &Signature {
         &self.signature
     }
@@ -53,13 +53,13 @@ impl Functor for Reflect {
     /// `twin.wgsl`, reading the materials, built once per shading set-up.
     fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
         let shading =
-            request_resources::<TraceResources>(request, "reflect")?.shading_gpu_buffers();
+            request_resources::<TraceResources>(request, "reflectRay")?.shading_gpu_buffers();
         let parts = TwinParts {
             modules: vec![vector_module(), surface_module()],
             buffers: vec![shading.materials],
             failures: vec![
-                diagonal_failure("reflect"),
-                "reflect: a surface has a material the scene does not have".into(),
+                diagonal_failure("reflectRay"),
+                "reflectRay: a surface has a material the scene does not have".into(),
             ],
             ..TwinParts::default()
         };
@@ -74,7 +74,7 @@ impl Functor for Reflect {
     ) -> Result<(), FunctorError> {
         let max_depth = ctx.named(0).as_int().unwrap_or(0);
         let materials = ctx.resources::<TraceResources>()?.shading.materials();
-        let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "reflect")?;
+        let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "reflectRay")?;
         let surfaces = SurfaceColumns::new(&inputs[0]);
         // Every material a reflected hit names must exist: checked up front, so
         // that the loop below cannot fail.
@@ -85,7 +85,7 @@ impl Functor for Reflect {
             .find(|&i| reflects(i) && surfaces.material[i] as usize >= materials.len())
         {
             return Err(FunctorError::bad_input(format!(
-                "reflect: surface has material {}, but the scene has {} materials",
+                "reflectRay: surface has material {}, but the scene has {} materials",
                 surfaces.material[index],
                 materials.len()
             )));
@@ -161,7 +161,9 @@ mod tests {
         let diagonal = fixture.resources.scene.bounds.diagonal();
         let view = Vec3::new(-1.0, 0.0, 1.0).normalize();
         let surfaces = fixture.surfaces(&[surface(view, 0), surface(Vec3::Z, 1)]);
-        let out = fixture.run("reflect", &[], 0, &[surfaces.view()]).unwrap();
+        let out = fixture
+            .run("reflectRay", &[], 0, &[surfaces.view()])
+            .unwrap();
         let rays = read_rays(&out[0]);
         // Coming in along (1, 0, -1), leaving along (1, 0, 1).
         assert!((rays[0].dir - Vec3::new(1.0, 0.0, 1.0).normalize()).length() < 1e-6);
@@ -192,7 +194,9 @@ mod tests {
             "the test should reflect into the surface"
         );
         let surfaces = fixture.surfaces(&[leaning]);
-        let out = fixture.run("reflect", &[], 0, &[surfaces.view()]).unwrap();
+        let out = fixture
+            .run("reflectRay", &[], 0, &[surfaces.view()])
+            .unwrap();
         let ray = read_rays(&out[0])[0];
         assert!(
             (ray.dir - Vec3::new(-0.28, 0.0, 0.96)).length() < 1e-6,
@@ -211,7 +215,7 @@ mod tests {
             SurfaceRecord::miss(4, Vec3::ONE, 0),
         ]);
         let out = fixture
-            .run("reflect", &[HostValue::Int(3)], 0, &[surfaces.view()])
+            .run("reflectRay", &[HostValue::Int(3)], 0, &[surfaces.view()])
             .unwrap();
         let rays = read_rays(&out[0]);
         assert!(rays[0].tmax > 0.0 && rays[0].depth == 2);
@@ -219,15 +223,17 @@ mod tests {
         assert_eq!(rays[2], RayRecord::dead(4, 1));
         // maxDepth 1: no reflections at all.
         let out = fixture
-            .run("reflect", &[HostValue::Int(1)], 0, &[surfaces.view()])
+            .run("reflectRay", &[HostValue::Int(1)], 0, &[surfaces.view()])
             .unwrap();
         assert!(read_rays(&out[0]).iter().all(|r| r.tmax == 0.0));
         // The default material does not reflect.
         let dull = Fixture::new();
-        let out = dull.run("reflect", &[], 0, &[surfaces.view()]).unwrap();
+        let out = dull.run("reflectRay", &[], 0, &[surfaces.view()]).unwrap();
         assert_eq!(read_rays(&out[0])[0], RayRecord::dead(9, 2));
         // And `alive` tells them apart.
-        let out = fixture.run("reflect", &[], 0, &[surfaces.view()]).unwrap();
+        let out = fixture
+            .run("reflectRay", &[], 0, &[surfaces.view()])
+            .unwrap();
         let alive = fixture.run("alive", &[], 0, &[out[0].view()]).unwrap();
         assert_eq!(alive[0].view().as_bool(), &[true, false, false]);
     }
@@ -241,11 +247,11 @@ mod tests {
         unknown.material = 99;
         let surfaces = fixture.surfaces(&[surface(Vec3::Z, 0), unknown]);
         let error = fixture
-            .run("reflect", &[HostValue::Int(3)], 0, &[surfaces.view()])
+            .run("reflectRay", &[HostValue::Int(3)], 0, &[surfaces.view()])
             .unwrap_err();
         assert!(error.message.contains("material 99"), "{}", error.message);
         let out = fixture
-            .run("reflect", &[HostValue::Int(1)], 0, &[surfaces.view()])
+            .run("reflectRay", &[HostValue::Int(1)], 0, &[surfaces.view()])
             .unwrap();
         assert!(read_rays(&out[0]).iter().all(|r| r.tmax == 0.0));
     }

@@ -1,4 +1,4 @@
-// The WGSL twin of `reflect` (mod.rs beside this file): the mirror ray of a
+// The WGSL twin of `reflectRay` (mod.rs beside this file): the mirror ray of a
 // reflective hit (buffer tracer_materials, 2 per material: (Kd, Ns), (Ks,
 // reflectivity)), off the surface along the geometric normal, with weight *
 // reflectivity and depth + 1; dead for misses, dull materials and at maxDepth.
