@@ -268,33 +268,35 @@ pub(super) fn functors() -> Vec<Arc<dyn Functor>> {
             ElemType::Vec2,
             "vec2",
             "splat2",
+            2,
             "a vec2 from its components",
-            "vec2(x, x)",
+            "a vec2 with x in every component",
         ),
         (
             ElemType::Vec3,
             "vec3",
             "splat3",
+            3,
             "a vec3 from its components",
-            "vec3(x, x, x)",
+            "a vec3 with x in every component",
         ),
         (
             ElemType::Vec4,
             "vec4",
             "splat4",
+            4,
             "a vec4 from its components",
-            "vec4(x, x, x, x)",
+            "a vec4 with x in every component",
         ),
     ];
-    for (ty, name, splat, doc, splat_doc) in vectors {
-        let components = ["x", "y", "z", "w"];
-        let n = vector_size(ty).unwrap_or_default();
-        let signature = components[..n]
+    for (ty, name, splat, size, doc, splat_doc) in vectors {
+        let components = &["x", "y", "z", "w"][..size];
+        let signature = components
             .iter()
             .fold(Signature::map(name), |s, c| s.input(c, F32))
             .output("out", ty)
             .doc(doc);
-        let arguments = components[..n].join(", ");
+        let arguments = components.join(", ");
         functors.push(functor(
             signature,
             move |_, inputs| build_vectors(ty, inputs),
