@@ -131,6 +131,8 @@ pub enum ExprKind {
     },
     Binary {
         op: BinaryOp,
+        /// The operator itself, where a type error between its operands points.
+        op_span: Span,
         lhs: Box<Expr>,
         rhs: Box<Expr>,
     },

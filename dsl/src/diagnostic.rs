@@ -62,8 +62,6 @@ pub enum Code {
     ExpectedArray,
     /// `dpp::expected-scalar`: an array where a host scalar is needed.
     ExpectedScalar,
-    /// `dpp::array-arithmetic`: an operator applied to arrays.
-    ArrayArithmetic,
     /// `dpp::type-mismatch`: a value of the wrong type.
     TypeMismatch,
     /// `dpp::length-mismatch`: arrays whose lengths are known to differ.
@@ -109,7 +107,6 @@ impl Code {
             Code::ScatterTarget => "dpp::scatter-target",
             Code::ExpectedArray => "dpp::expected-array",
             Code::ExpectedScalar => "dpp::expected-scalar",
-            Code::ArrayArithmetic => "dpp::array-arithmetic",
             Code::TypeMismatch => "dpp::type-mismatch",
             Code::LengthMismatch => "dpp::length-mismatch",
             Code::UnknownField => "dpp::unknown-field",

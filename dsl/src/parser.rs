@@ -1006,12 +1006,14 @@ impl Builder {
 
     fn binary(&mut self, op: &Pair<Rule>, lhs: Built, rhs: Built) -> Built {
         let span = lhs.expr.span.to(rhs.expr.span);
+        let op_span = self.span(op);
         let Some(op) = binary_op(op.as_rule()) else {
             return self.placeholder(span);
         };
         let height = lhs.height.max(rhs.height);
         let kind = ExprKind::Binary {
             op,
+            op_span,
             lhs: Box::new(lhs.expr),
             rhs: Box::new(rhs.expr),
         };

@@ -386,6 +386,12 @@ impl Generator<'_, '_, '_> {
                         },
                     ));
                 }
+                OpKind::Elementwise { .. } => {
+                    return Err(RunError::internal(format!(
+                        "`{}` reached the GPU backend before the compiler made it a map",
+                        op.label()
+                    )))
+                }
             }
         }
         Ok(sinks)

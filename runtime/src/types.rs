@@ -52,6 +52,22 @@ impl ElemType {
     pub fn is_integer(self) -> bool {
         matches!(self, ElemType::U32 | ElemType::I32)
     }
+
+    pub fn is_vector(self) -> bool {
+        matches!(self, ElemType::Vec2 | ElemType::Vec3 | ElemType::Vec4)
+    }
+
+    /// How many numbers an element holds: 1 for a scalar, 2–4 for a vector
+    /// (0 for a bool or a record, which are not numbers).
+    pub fn components(self) -> u32 {
+        match self {
+            ElemType::U32 | ElemType::I32 | ElemType::F32 => 1,
+            ElemType::Vec2 => 2,
+            ElemType::Vec3 => 3,
+            ElemType::Vec4 => 4,
+            ElemType::Bool | ElemType::Record(_) => 0,
+        }
+    }
 }
 
 /// A record type registered by the functor library (`Ray`, `Hit`, …): named

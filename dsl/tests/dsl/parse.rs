@@ -209,7 +209,7 @@ impl SexprPrinter {
                 };
                 format!("({op} {})", Self::expr(operand))
             }
-            ExprKind::Binary { op, lhs, rhs } => {
+            ExprKind::Binary { op, lhs, rhs, .. } => {
                 format!("({} {} {})", op.symbol(), Self::expr(lhs), Self::expr(rhs))
             }
             ExprKind::Tuple(elements) => {

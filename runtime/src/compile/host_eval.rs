@@ -190,5 +190,6 @@ fn call(function: HostFunction, args: &[HostValue]) -> Result<HostValue, String>
             Int(y as i64)
         }
         HostFunction::Sqrt => Float(number(0)?.sqrt()),
+        HostFunction::Float => Float(number(0)?),
     })
 }

@@ -78,10 +78,11 @@ pub enum HostFunction {
     Floor,
     Ceil,
     Sqrt,
+    Float,
 }
 
 impl HostFunction {
-    pub const ALL: [(&'static str, HostFunction); 9] = [
+    pub const ALL: [(&'static str, HostFunction); 10] = [
         ("vec2", HostFunction::Vec2),
         ("vec3", HostFunction::Vec3),
         ("vec4", HostFunction::Vec4),
@@ -91,6 +92,7 @@ impl HostFunction {
         ("floor", HostFunction::Floor),
         ("ceil", HostFunction::Ceil),
         ("sqrt", HostFunction::Sqrt),
+        ("float", HostFunction::Float),
     ];
 
     pub fn name(self) -> &'static str {
@@ -192,6 +194,16 @@ pub enum OpKind {
     Fill { count: HostExpr, value: HostExpr },
     /// `map<f>(inputs…)`.
     Map,
+    /// An element-wise expression before desugaring (`a + 1.0`, `sqrt(x)`):
+    /// the functor applied to arrays and host scalars, which the `desugar`
+    /// pass turns into a `map` after broadcasting host scalars (`fill`) and
+    /// `f32` arrays against vectors (`splat`). `inputs` holds the array
+    /// operands, in order; never seen after type checking.
+    Elementwise {
+        operands: Vec<Operand>,
+        /// The operator it was written with (`+`, `!`), for its errors; `None` for a call.
+        operator: Option<&'static str>,
+    },
     /// `gather(idx, src)`: inputs `[idx, src]`.
     Gather,
     /// `gather<f>(src, group: k)`: inputs `[src]`.
@@ -212,6 +224,13 @@ pub enum OpKind {
         exclusive: bool,
         segments: Option<VarId>,
     },
+}
+
+/// An operand of an [`OpKind::Elementwise`] op.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub enum Operand {
+    Array(VarId),
+    Host(HostExpr),
 }
 
 /// One primitive application.
@@ -244,6 +263,13 @@ macro_rules! op_host_exprs {
                 target: ScatterTarget::Len(len),
                 ..
             } => exprs.push(len),
+            OpKind::Elementwise { operands, .. } => {
+                for operand in operands {
+                    if let Operand::Host(expr) = operand {
+                        exprs.push(expr);
+                    }
+                }
+            }
             _ => {}
         }
         exprs
@@ -262,7 +288,7 @@ impl Op {
             OpKind::Field { .. } => return Err("field"),
             OpKind::Iota { .. } => return Err(Generator::Iota.name()),
             OpKind::Fill { .. } => return Err(Generator::Fill.name()),
-            OpKind::Map => Primitive::Map,
+            OpKind::Map | OpKind::Elementwise { .. } => Primitive::Map,
             OpKind::Gather | OpKind::GroupGather { .. } => Primitive::Gather,
             OpKind::Expand { .. } | OpKind::Scatter { .. } => Primitive::Scatter,
             OpKind::Reduce { .. } => Primitive::Reduce,

@@ -7,7 +7,7 @@ use super::ir::*;
 use super::resolve::{is_reserved, Program};
 use crate::functor::FunctorLibrary;
 use crate::host::HostValue;
-use crate::signature::{FunctorKind, Signature};
+use crate::signature::{FunctorKind, NamedParam, Signature};
 use crate::types::HostType;
 use dpp_dsl::ast::{self, Block, Call, ExprKind, Ident, StmtKind};
 use dpp_dsl::{did_you_mean, Code, Diagnostic, Span};
@@ -615,10 +615,34 @@ impl Lowerer<'_, '_> {
             }
             ExprKind::Call(call) => self.lower_call(call, expr.span, out),
             ExprKind::Unary { op, operand } => {
-                let operand = self.lower_host(operand, out);
-                Value::Host(HostExpr::Unary(*op, Box::new(operand)))
+                let value = self.lower_expr(operand, out);
+                match value {
+                    Value::Host(operand) => Value::Host(HostExpr::Unary(*op, Box::new(operand))),
+                    Value::Error => Value::Error,
+                    value => {
+                        let functor = match op {
+                            ast::UnaryOp::Neg => "neg",
+                            ast::UnaryOp::Not => "not",
+                        };
+                        let symbol = if functor == "neg" { "-" } else { "!" };
+                        let operands = vec![(value, operand.span)];
+                        self.elementwise(
+                            functor,
+                            Some(symbol),
+                            operands,
+                            Vec::new(),
+                            expr.span,
+                            out,
+                        )
+                    }
+                }
             }
-            ExprKind::Binary { op, lhs, rhs } => {
+            ExprKind::Binary {
+                op,
+                op_span,
+                lhs,
+                rhs,
+            } => {
                 let l = self.lower_expr(lhs, out);
                 let r = self.lower_expr(rhs, out);
                 match (l, r) {
@@ -626,31 +650,92 @@ impl Lowerer<'_, '_> {
                         Value::Host(HostExpr::Binary(*op, Box::new(l), Box::new(r)))
                     }
                     (Value::Error, _) | (_, Value::Error) => Value::Error,
-                    _ => {
+                    (l, r) => {
                         let functor = match op {
                             ast::BinaryOp::Add => "add",
                             ast::BinaryOp::Sub => "sub",
                             ast::BinaryOp::Mul => "mul",
                             ast::BinaryOp::Div => "div",
-                            ast::BinaryOp::Lt => "lt",
-                            ast::BinaryOp::Gt => "gt",
+                            ast::BinaryOp::Rem => "rem",
                             ast::BinaryOp::Eq => "eq",
-                            _ => "…",
+                            ast::BinaryOp::Ne => "ne",
+                            ast::BinaryOp::Lt => "lt",
+                            ast::BinaryOp::Le => "le",
+                            ast::BinaryOp::Gt => "gt",
+                            ast::BinaryOp::Ge => "ge",
+                            ast::BinaryOp::And => "and",
+                            ast::BinaryOp::Or => "or",
                         };
-                        self.error(
-                            Diagnostic::error(
-                                Code::ArrayArithmetic,
-                                format!("`{}` combines host scalars, not arrays", op.symbol()),
-                                expr.span,
-                            )
-                            .with_help(format!(
-                                "combine arrays element by element with `map<{functor}>(a, b)`"
-                            )),
-                        );
-                        Value::Error
+                        let operands = vec![(l, lhs.span), (r, rhs.span)];
+                        self.elementwise(
+                            functor,
+                            Some(op.symbol()),
+                            operands,
+                            Vec::new(),
+                            *op_span,
+                            out,
+                        )
                     }
                 }
             }
+        }
+    }
+
+    /// An operator or functor call over arrays (and host scalars): one
+    /// element-wise op, which type checking types and `desugar` turns into a
+    /// `map` of `functor`, with host scalars broadcast.
+    fn elementwise(
+        &mut self,
+        functor: &str,
+        operator: Option<&'static str>,
+        operands: Vec<(Value, Span)>,
+        named: Vec<(String, HostExpr)>,
+        span: Span,
+        out: &mut Vec<Node>,
+    ) -> Value {
+        let Some(signature) = self.library.get(functor).map(|f| f.signature().clone()) else {
+            self.error(Diagnostic::error(
+                Code::UnknownFunctor,
+                format!("`{functor}` over arrays needs the functor `{functor}`, which this library lacks"),
+                span,
+            ));
+            return Value::Error;
+        };
+        let mut inputs = Vec::new();
+        let mut lowered = Vec::with_capacity(operands.len());
+        for (value, operand_span) in operands {
+            match value {
+                Value::Array(v) => {
+                    inputs.push(v);
+                    lowered.push(Operand::Array(v));
+                }
+                Value::Host(e) => lowered.push(Operand::Host(e)),
+                Value::Error => return Value::Error,
+                Value::Tuple(_) => {
+                    return self
+                        .expect_array((value, operand_span))
+                        .map_or(Value::Error, Value::Array)
+                }
+            }
+        }
+        let outputs: Vec<VarId> = (0..signature.outputs.len().max(1))
+            .map(|_| self.new_temp(span))
+            .collect();
+        out.push(Node::Op(Op {
+            kind: OpKind::Elementwise {
+                operands: lowered,
+                operator,
+            },
+            functor: Some(functor.to_string()),
+            inputs,
+            outputs: outputs.clone(),
+            named,
+            span,
+        }));
+        if outputs.len() == 1 {
+            Value::Array(outputs[0])
+        } else {
+            Value::Tuple(outputs)
         }
     }
 
@@ -778,6 +863,47 @@ impl Lowerer<'_, '_> {
         if let Some(primitive) = primitive {
             return self.lower_primitive(primitive, call, span, positional, named, out);
         }
+        // A functor called by name (`sqrt(x)`, `dot(a, b)`, `random(i, seed: 2)`)
+        // is element-wise; it may take its named arguments.
+        let any_array = positional
+            .iter()
+            .any(|(v, _)| matches!(v, Value::Array(_) | Value::Tuple(_)));
+        let host_function = HostFunction::ALL.iter().find(|(n, _)| *n == callee);
+        let functor = self
+            .library
+            .get(callee)
+            .map(|f| f.signature().clone())
+            .filter(|s| matches!(s.kind, FunctorKind::Map | FunctorKind::Monoid(_)));
+        let is_generator_or_fn =
+            Generator::from_name(callee).is_some() || self.program.fns.contains_key(callee);
+        if let (Some(signature), false, false) =
+            (&functor, is_generator_or_fn, host_function.is_some())
+        {
+            if !any_array {
+                self.error(
+                    Diagnostic::error(
+                        Code::ExpectedArray,
+                        format!("`{callee}` is a functor: it applies element by element to arrays, and none of its arguments is one"),
+                        span,
+                    )
+                    .with_help("give it at least one array; host scalars are broadcast"),
+                );
+                return Value::Error;
+            }
+            let Some(named_values) =
+                self.named_arguments(callee, &signature.named, &named, &[], span, out)
+            else {
+                return Value::Error;
+            };
+            return self.elementwise(
+                callee,
+                None,
+                positional,
+                named_values,
+                call.callee.span,
+                out,
+            );
+        }
         // Everything else takes no named arguments.
         if let Some((name, _)) = named.first() {
             self.error(Diagnostic::error(
@@ -786,6 +912,17 @@ impl Lowerer<'_, '_> {
                 name.span,
             ));
             return Value::Error;
+        }
+        if let (Some((_, function)), true) = (host_function, any_array) {
+            // The host functions over arrays: their element-wise functors.
+            let functor = match (function, positional.len()) {
+                (HostFunction::Vec2, 1) => "splat2",
+                (HostFunction::Vec3, 1) => "splat3",
+                (HostFunction::Vec4, 1) => "splat4",
+                (HostFunction::Float, _) => "toF32",
+                (function, _) => function.name(),
+            };
+            return self.elementwise(functor, None, positional, Vec::new(), call.callee.span, out);
         }
         match Generator::from_name(callee) {
             Some(generator @ (Generator::Iota | Generator::Fill)) => {
@@ -1453,59 +1590,21 @@ impl Lowerer<'_, '_> {
             return Value::Error;
         }
 
-        // Named functor arguments, in signature order with defaults.
-        let mut named_values = Vec::new();
         let signature_named = functor
             .as_ref()
             .map(|(_, s)| s.named.clone())
             .unwrap_or_default();
-        for (name, value) in &functor_named {
-            if !signature_named.iter().any(|p| p.name == name.name) {
-                let mut candidates: Vec<&str> = signature_named.iter().map(|p| p.name).collect();
-                candidates.extend(primitive_keys);
-                let mut diagnostic = Diagnostic::error(
-                    Code::UnknownArgument,
-                    format!("unknown argument `{}`", name.name),
-                    name.span,
-                );
-                if let Some(s) = did_you_mean(&name.name, candidates.iter().copied()) {
-                    diagnostic = diagnostic.with_help(format!("did you mean `{s}`?"));
-                } else if candidates.is_empty() {
-                    diagnostic = diagnostic.with_help("this takes no named arguments");
-                } else {
-                    diagnostic =
-                        diagnostic.with_help(format!("it takes: {}", candidates.join(", ")));
-                }
-                self.error(diagnostic);
-                let _ = value;
-            }
-        }
-        for param in &signature_named {
-            match functor_named.iter().find(|(n, _)| n.name == param.name) {
-                Some((_, value)) => {
-                    let expr = self.lower_host(value, out);
-                    named_values.push((param.name.to_string(), expr));
-                }
-                None => match param.default {
-                    Some(default) => {
-                        named_values.push((param.name.to_string(), HostExpr::Const(default)))
-                    }
-                    None => {
-                        self.error(Diagnostic::error(
-                            Code::MissingArgument,
-                            format!(
-                                "`{}` needs the argument `{}: {}`",
-                                call.functor.as_ref().map_or("", |f| f.name.as_str()),
-                                param.name,
-                                param.ty
-                            ),
-                            span,
-                        ));
-                        return Value::Error;
-                    }
-                },
-            }
-        }
+        let functor_name = call.functor.as_ref().map_or("", |f| f.name.as_str());
+        let Some(named_values) = self.named_arguments(
+            functor_name,
+            &signature_named,
+            &functor_named,
+            primitive_keys,
+            span,
+            out,
+        ) else {
+            return Value::Error;
+        };
 
         let output_count = match (&kind, &functor) {
             (OpKind::Reduce { .. }, _) => 1,
@@ -1536,6 +1635,66 @@ impl Lowerer<'_, '_> {
         } else {
             Value::Tuple(outputs)
         }
+    }
+
+    /// A functor's named arguments in signature order, defaults filled in;
+    /// `None` when one it needs is missing. `other_keys` are the primitive's
+    /// own, offered when a name is unknown.
+    fn named_arguments(
+        &mut self,
+        functor: &str,
+        signature_named: &[NamedParam],
+        given: &[(&Ident, &ast::Expr)],
+        other_keys: &[&str],
+        span: Span,
+        out: &mut Vec<Node>,
+    ) -> Option<Vec<(String, HostExpr)>> {
+        for (name, _) in given {
+            if !signature_named.iter().any(|p| p.name == name.name) {
+                let mut candidates: Vec<&str> = signature_named.iter().map(|p| p.name).collect();
+                candidates.extend(other_keys);
+                let mut diagnostic = Diagnostic::error(
+                    Code::UnknownArgument,
+                    format!("unknown argument `{}`", name.name),
+                    name.span,
+                );
+                if let Some(s) = did_you_mean(&name.name, candidates.iter().copied()) {
+                    diagnostic = diagnostic.with_help(format!("did you mean `{s}`?"));
+                } else if candidates.is_empty() {
+                    diagnostic = diagnostic.with_help("this takes no named arguments");
+                } else {
+                    diagnostic =
+                        diagnostic.with_help(format!("it takes: {}", candidates.join(", ")));
+                }
+                self.error(diagnostic);
+            }
+        }
+        let mut values = Vec::new();
+        for param in signature_named {
+            match given.iter().find(|(n, _)| n.name == param.name) {
+                Some((_, value)) => {
+                    let expr = self.lower_host(value, out);
+                    values.push((param.name.to_string(), expr));
+                }
+                None => match param.default {
+                    Some(default) => {
+                        values.push((param.name.to_string(), HostExpr::Const(default)))
+                    }
+                    None => {
+                        self.error(Diagnostic::error(
+                            Code::MissingArgument,
+                            format!(
+                                "`{functor}` needs the argument `{}: {}`",
+                                param.name, param.ty
+                            ),
+                            span,
+                        ));
+                        return None;
+                    }
+                },
+            }
+        }
+        Some(values)
     }
 
     fn required_key(

@@ -1,12 +1,13 @@
 //! The plan compiler: a chain of small passes, one per file.
 //!
 //! `load` (files and `use`s) → `resolve` (items) → `lower` (AST to ops, names,
-//! fn inlining) → `typecheck` (types and symbolic lengths) → `cse` → `fuse`
-//! (stages). Each pass reports diagnostics instead of stopping at the first.
+//! fn inlining) → `typecheck` (types and symbolic lengths) → `desugar`
+//! (element-wise expressions to maps) → `cse` → `fuse` (stages). Each pass reports diagnostics instead of stopping at the first.
 //! In debug builds (so in every test) `validate` checks the plan's invariants
 //! after each pass that makes or changes one.
 
 pub mod cse;
+pub mod desugar;
 pub mod fuse;
 pub mod host_eval;
 pub mod ir;
@@ -148,15 +149,18 @@ fn compile(
             }
         }
     }
-    let mut internal: Vec<Diagnostic> = validated(
-        "typecheck",
+    let mut internal: Vec<Diagnostic> = Vec::new();
+    if let Err(message) = desugar::desugar_expressions(&mut body, &mut lowered.vars, library) {
+        internal.push(Diagnostic::error(Code::Internal, message, pipeline_span));
+        return fail(sources, internal);
+    }
+    internal.extend(validated(
+        "desugar",
         &lowered.vars,
         &body,
         PlanPhase::Typed,
         pipeline_span,
-    )
-    .into_iter()
-    .collect();
+    ));
     cse::eliminate_common_subexpressions(&mut body, &mut lowered.vars);
     internal.extend(validated(
         "cse",

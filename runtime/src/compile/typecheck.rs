@@ -1,6 +1,7 @@
 //! Pass 4: infer the type and symbolic length of every variable, and check
 //! every op against its functor's signature and its primitive's rules.
 
+use super::desugar::{broadcast, swizzle, vector_of_width, OperandType};
 use super::ir::*;
 use crate::functor::FunctorLibrary;
 use crate::host::HostValue;
@@ -278,6 +279,66 @@ impl Checker<'_> {
             .collect();
         let first_len = op.inputs.first().map(|v| self.symbolic_len(*v));
         match &op.kind {
+            OpKind::Field { field } if input_types[0].is_vector() => {
+                let width = input_types[0].components();
+                match swizzle(field, width) {
+                    Some(components) => {
+                        let ty = vector_of_width(components.len());
+                        self.assign(op.outputs[0], VarType::Array(ty), first_len, op.span);
+                    }
+                    None => {
+                        let ty = input_types[0].name(self.records());
+                        let letters = &"xyzw"[..width as usize];
+                        self.diagnostics.push(
+                            Diagnostic::error(
+                                Code::UnknownField,
+                                format!("`.{field}`: an array of {ty} has no such components"),
+                                op.span,
+                            )
+                            .with_help(format!(
+                                "pick up to 4 of its components {}, like `.x` or `.{}`",
+                                letters
+                                    .chars()
+                                    .map(|c| format!("`{c}`"))
+                                    .collect::<Vec<_>>()
+                                    .join(", "),
+                                letters.chars().rev().collect::<String>()
+                            )),
+                        );
+                    }
+                }
+            }
+            OpKind::Elementwise { operands, .. } => {
+                let Some(signature) = signature else { return };
+                let mut types = Vec::with_capacity(operands.len());
+                for operand in operands {
+                    types.push(match operand {
+                        Operand::Array(v) => match self.array_type(*v) {
+                            Some(t) => OperandType::Array(t),
+                            None => return,
+                        },
+                        Operand::Host(e) => match self.host_type(e, op.span) {
+                            Some(h) => OperandType::Host(h),
+                            None => return,
+                        },
+                    });
+                }
+                let what = elementwise_name(op);
+                match broadcast(&signature, &types, self.records(), &what) {
+                    Ok(broadcast) => {
+                        self.check_same_length(op, &op.inputs);
+                        for (output, ty) in op.outputs.iter().zip(broadcast.outputs) {
+                            self.assign(*output, VarType::Array(ty), first_len.clone(), op.span);
+                        }
+                    }
+                    Err(message) => self.diagnostics.push(
+                        Diagnostic::error(Code::TypeMismatch, message, op.span).with_help(format!(
+                            "signature: {}",
+                            signature.display(self.records()).trim()
+                        )),
+                    ),
+                }
+            }
             OpKind::Field { field } => {
                 let ElemType::Record(id) = input_types[0] else {
                     let ty = input_types[0].name(self.records());
@@ -640,7 +701,7 @@ pub fn host_type(
                     }
                     Int
                 }
-                HostFunction::Sqrt => {
+                HostFunction::Sqrt | HostFunction::Float => {
                     if !numbers || types.len() != 1 {
                         return arity_error("1 number");
                     }
@@ -666,5 +727,17 @@ pub fn fold_constant(expr: &HostExpr) -> Option<i64> {
             }
         }
         _ => None,
+    }
+}
+
+/// How an element-wise op is named in its errors: as written, its operator
+/// (`` `+` ``) or its function (`` `sqrt` ``).
+fn elementwise_name(op: &Op) -> String {
+    match &op.kind {
+        OpKind::Elementwise {
+            operator: Some(operator),
+            ..
+        } => format!("`{operator}`"),
+        _ => format!("`{}`", op.functor.as_deref().unwrap_or_default()),
     }
 }

@@ -23,7 +23,7 @@ use std::collections::HashSet;
 pub enum PlanPhase {
     /// Out of `lower`: ops, types not yet inferred.
     Lowered,
-    /// Out of `typecheck` or `cse`: ops, every variable typed.
+    /// Out of `desugar` or `cse`: ops (no element-wise ones), every variable typed.
     Typed,
     /// Out of `fuse`: stages, no bare ops.
     Fused,
@@ -162,6 +162,15 @@ impl Validator<'_> {
             OpKind::Iota { .. } | OpKind::Fill { .. } => (Some(0), Some(false)),
             OpKind::Field { .. } => (Some(1), Some(false)),
             OpKind::Map => (None, Some(true)),
+            OpKind::Elementwise { .. } => {
+                if self.phase != PlanPhase::Lowered {
+                    self.problem(format!(
+                        "the element-wise op `{}` was not desugared into maps",
+                        op.label()
+                    ));
+                }
+                (None, Some(true))
+            }
             OpKind::Gather => (Some(2), Some(false)),
             OpKind::GroupGather { .. } | OpKind::Expand { .. } => (Some(1), Some(true)),
             OpKind::Scatter { combine, .. } => (Some(2), Some(combine.is_some())),
@@ -181,7 +190,7 @@ impl Validator<'_> {
             ));
         }
         let outputs_ok = match op.kind {
-            OpKind::Map => !op.outputs.is_empty(),
+            OpKind::Map | OpKind::Elementwise { .. } => !op.outputs.is_empty(),
             _ => op.outputs.len() == 1,
         };
         if !outputs_ok {

@@ -677,6 +677,12 @@ impl StageRun<'_, '_> {
                         total,
                     });
                 }
+                OpKind::Elementwise { .. } => {
+                    return Err(RunError::internal(format!(
+                        "`{}` reached the CPU backend before the compiler made it a map",
+                        op.label()
+                    )))
+                }
             }
             for (output, column) in op.outputs.iter().zip(produced) {
                 if column.elem_type() != self.elem_type(*output) {

@@ -9,6 +9,7 @@ mod diagnostics;
 mod generic_functors;
 mod kernels;
 mod pass_cse;
+mod pass_desugar;
 mod pass_fuse;
 mod pass_lower;
 mod pass_resolve;

@@ -403,14 +403,13 @@ fn an_operand_in_error_is_reported_once() {
         }
         "#,
         @"
-    dpp::unknown-name at 3:8 `flag`: unknown name `flag`
-    dpp::unknown-name at 4:15 `missing`: unknown name `missing`
-    dpp::expected-scalar at 5:8 `x`: expected a host scalar, found an array
-      help: arrays become scalars through `reduce<f>(a)` or `len(a)`
-    dpp::expected-scalar at 6:17 `x`: expected a host scalar, found an array
-    dpp::array-arithmetic at 7:26 `y + 1`: `+` combines host scalars, not arrays
-      help: combine arrays element by element with `map<add>(a, b)`
-    "
+            dpp::unknown-name at 3:8 `flag`: unknown name `flag`
+            dpp::unknown-name at 4:15 `missing`: unknown name `missing`
+            dpp::expected-scalar at 5:8 `x`: expected a host scalar, found an array
+              help: arrays become scalars through `reduce<f>(a)` or `len(a)`
+            dpp::expected-scalar at 6:17 `x`: expected a host scalar, found an array
+            dpp::expected-scalar at 7:26 `y + 1 > 2`: expected a host scalar, found an array
+        "
     );
 }
 
