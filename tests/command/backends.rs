@@ -63,7 +63,11 @@ fn comparison(name: &str) -> Option<Comparison> {
             prim: true,
             exact: vec![],
         },
-        "workload2" | "workload3" | "examples.translucent" => Comparison {
+        "workload2"
+        | "workload2_expressions"
+        | "workload3"
+        | "workload3_expressions"
+        | "examples.translucent" => Comparison {
             args: scene(&[]),
             image: true,
             prim: false,

@@ -9,5 +9,6 @@ mod cli_citizen;
 mod common;
 #[cfg(feature = "mpi")]
 mod distributed;
+mod expressions;
 mod images;
 mod plans;

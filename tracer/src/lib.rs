@@ -30,7 +30,7 @@ use dpp_runtime::{ElemType, FunctorLibrary, HostType, HostValue, RecordId, Recor
 use std::sync::Arc;
 
 /// The uniform fields the tracer fills, by record: `(record, field, type)`.
-pub const UNIFORM_FIELDS: [(&str, &str, HostType); 14] = [
+pub const UNIFORM_FIELDS: [(&str, &str, HostType); 15] = [
     ("camera", "width", HostType::Int),
     ("camera", "height", HostType::Int),
     ("camera", "pixels", HostType::Int),
@@ -45,6 +45,7 @@ pub const UNIFORM_FIELDS: [(&str, &str, HostType); 14] = [
     ("scene", "center", HostType::Vec3),
     ("scene", "diagonal", HostType::Float),
     ("scene", "lights", HostType::Int),
+    ("scene", "background", HostType::Vec3),
 ];
 
 /// Registers the `Ray`, `Hit` and `Surface` records, declares the `camera.*` and
@@ -55,7 +56,13 @@ pub fn register_tracer_functors(library: &mut FunctorLibrary) -> TracerRecords {
     for (record, field, ty) in UNIFORM_FIELDS {
         library.uniforms.declare(record, field, ty);
     }
-    let TracerRecords { ray, hit, surface } = records;
+    let TracerRecords {
+        ray,
+        hit,
+        surface,
+        material,
+        light,
+    } = records;
     let functors: Vec<Arc<dyn dpp_runtime::Functor>> = vec![
         Arc::new(camera_ray::CameraRay::new(ray)),
         Arc::new(intersect::Intersect::new(ray, hit)),
@@ -70,6 +77,10 @@ pub fn register_tracer_functors(library: &mut FunctorLibrary) -> TracerRecords {
         Arc::new(alive::Alive::new(ray)),
         Arc::new(anti_alias::AntiAlias::new()),
         Arc::new(global_id::GlobalId::new()),
+        Arc::new(material::MaterialFunctor::new(material)),
+        Arc::new(light::LightFunctor::new(light)),
+        Arc::new(colormap::Colormap::new()),
+        Arc::new(with_weight::WithWeight::new(ray)),
     ];
     for functor in functors {
         library.register(functor);
@@ -137,6 +148,7 @@ pub fn uniforms(scene: &TraceScene, camera: &CameraSetup, shading: &Shading) -> 
     );
     let lights = shading.lights().len() as i64;
     uniforms.set("scene", "lights", HostValue::Int(lights));
+    uniforms.set("scene", "background", vec3(shading.background()));
     uniforms
 }
 
@@ -214,8 +226,11 @@ mod tests {
                 "alive",
                 "antiAlias",
                 "cameraRay",
+                "colormap",
                 "globalId",
                 "intersect",
+                "light",
+                "material",
                 "normalColor",
                 "occRayGen",
                 "occluded",
@@ -223,7 +238,8 @@ mod tests {
                 "shader",
                 "shadowRay",
                 "surface",
-                "visibleLights"
+                "visibleLights",
+                "withWeight"
             ]
         );
         let fields = |id| -> Vec<String> {
@@ -283,6 +299,10 @@ mod tests {
             "group        antiAlias(color: vec3) -> (pixel: vec3)",
             "map          normalColor(ray: Ray, hit: Hit) -> (color: vec3)",
             "map          globalId(prim: u32) -> (id: u32)",
+            "map          material(id: u32) -> (m: Material)",
+            "map          light(index: u32) -> (l: Light)",
+            "map          colormap(scalar: f32) -> (rgb: vec3)",
+            "map          withWeight(ray: Ray, weight: vec3) -> (ray: Ray)",
         ];
         for line in expected {
             let name = line.split_whitespace().nth(1).unwrap();

@@ -14,12 +14,17 @@
 //!   shading needs of a hit (see [`surface`]): `normal` is the (interpolated)
 //!   shading normal, `geometric` the hit triangle's own normal, both on the side
 //!   the ray comes from; a miss has `hit = false` and zeros except `sample`,
-//!   `weight` and `depth`.
+//!   `weight` and `depth`;
+//! - `Material { diffuse: vec3, shininess: f32, specular: vec3, reflectivity: f32 }`
+//!   and `Light { position: vec3, intensity: f32, color: vec3 }`: the scene's
+//!   materials and lights as `material` and `light` give them to pipelines that
+//!   write their shading themselves.
 
 pub mod alive;
 pub mod anti_alias;
 pub mod camera_ray;
 pub mod case_triangles;
+pub mod colormap;
 pub mod cube_case;
 pub mod cube_triangle;
 pub mod global_id;
@@ -27,6 +32,8 @@ pub mod intersect;
 #[cfg(feature = "embree")]
 pub mod intersect_embree;
 pub mod isosurface;
+pub mod light;
+pub mod material;
 pub mod normal_color;
 pub mod occ_ray_gen;
 pub mod occluded;
@@ -36,6 +43,7 @@ pub mod shadow_ray;
 pub mod surface;
 pub mod visible_lights;
 pub mod wgsl;
+pub mod with_weight;
 
 use crate::bvh::{HitRecord, Ray};
 use dpp_runtime::{
@@ -60,6 +68,8 @@ pub struct TracerRecords {
     pub ray: RecordId,
     pub hit: RecordId,
     pub surface: RecordId,
+    pub material: RecordId,
+    pub light: RecordId,
 }
 
 pub(crate) fn register_records(records: &mut RecordRegistry) -> TracerRecords {
@@ -101,7 +111,32 @@ pub(crate) fn register_records(records: &mut RecordRegistry) -> TracerRecords {
         ],
         doc: "a shading point: position, unit shading normal facing the ray, unit vector towards the ray origin, interpolated scalar, material id; hit = false for a miss; sample, weight and depth of its ray; unit geometric (triangle) normal facing the ray, along which secondary rays leave".into(),
     });
-    TracerRecords { ray, hit, surface }
+    let material = records.register(RecordType {
+        name: "Material".into(),
+        fields: vec![
+            ("diffuse".into(), ElemType::Vec3),
+            ("shininess".into(), ElemType::F32),
+            ("specular".into(), ElemType::Vec3),
+            ("reflectivity".into(), ElemType::F32),
+        ],
+        doc: "a scene material: diffuse colour Kd (linear RGB), Phong exponent Ns, specular colour Ks, mirror reflectivity in [0, 1]".into(),
+    });
+    let light = records.register(RecordType {
+        name: "Light".into(),
+        fields: vec![
+            ("position".into(), ElemType::Vec3),
+            ("intensity".into(), ElemType::F32),
+            ("color".into(), ElemType::Vec3),
+        ],
+        doc: "a point light: position, intensity, linear RGB colour".into(),
+    });
+    TracerRecords {
+        ray,
+        hit,
+        surface,
+        material,
+        light,
+    }
 }
 
 /// One `Ray` record.

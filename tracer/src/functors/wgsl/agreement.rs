@@ -98,6 +98,10 @@ const SHADER: Within = Within {
     },
     why: "pow(x, Ns) is exp2(Ns * log2(x)) in WGSL, log2 within 2^-21 absolutely: times Ns <= 100, 3.3e-5 relative",
 };
+const COLORMAP: Within = within(
+    1e-6,
+    "a lerp between table entries in [0, 1]: a GPU may fuse its multiply-adds, an ULP or two",
+);
 const SRGB: Within = within(
     1e-6,
     "pow(x, 1/2.4) = exp2(log2(x) / 2.4): log2's 2^-21 absolute over 2.4, a few ULP of exp2",
@@ -1013,6 +1017,20 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
             ));
         }
     }
+    let new_weights = Column::Vec3(
+        (0..bounce.len())
+            .map(|_| Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()))
+            .collect(),
+    );
+    cases.push(agree(
+        curved,
+        "withWeight",
+        "reflection rays, live and dead",
+        &[&bounce, &new_weights],
+        &[],
+        1,
+        INTEGERS,
+    ));
     cases.push(agree(
         curved,
         "alive",
@@ -1056,6 +1074,66 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
         &[],
         1,
         SHADER,
+    ));
+    // The shading tables a pipeline reads to write its own shading model.
+    let synthetic_scalars = Column::F32(
+        (0..m)
+            .map(|i| match i % 7 {
+                0 => f32::NAN,
+                1 => -1.0e30,
+                2 => 1.0e30,
+                _ => rng.next_f32() * 2.0 - 0.5,
+            })
+            .collect(),
+    );
+    cases.push(agree(
+        curved,
+        "colormap",
+        "scalars in and beyond the range",
+        &[&synthetic_scalars],
+        &[],
+        1,
+        COLORMAP,
+    ));
+    let lights = curved.trace_resources().shading.lights().len() as u32;
+    cases.push(agree(
+        curved,
+        "light",
+        "every light",
+        &[&Column::U32((0..3 * lights).map(|i| i % lights).collect())],
+        &[],
+        1,
+        INTEGERS,
+    ));
+    let materials = curved.trace_resources().shading.materials().len() as u32;
+    cases.push(agree(
+        curved,
+        "material",
+        "every material",
+        &[&Column::U32(
+            (0..3 * materials).map(|i| i % materials).collect(),
+        )],
+        &[],
+        1,
+        INTEGERS,
+    ));
+    cases.push(fails(
+        curved,
+        "light",
+        "an index past the lights",
+        &[&Column::U32(vec![0, lights])],
+        &[],
+        1,
+        "light",
+    ));
+    cases.push(fails(
+        curved,
+        "material",
+        "an id past the materials",
+        &[&Column::U32(vec![0, materials])],
+        &[],
+        1,
+        "material",
     ));
     cases.push(agree(
         curved,

@@ -33,7 +33,7 @@ enum Reads {
     Nothing,
 }
 
-const TWINS: [(&str, Reads); 16] = [
+const TWINS: [(&str, Reads); 20] = [
     ("cameraRay", Reads::Scene),
     ("intersect", Reads::Scene),
     ("occluded", Reads::Scene),
@@ -47,6 +47,10 @@ const TWINS: [(&str, Reads); 16] = [
     ("alive", Reads::Nothing),
     ("antiAlias", Reads::Nothing),
     ("globalId", Reads::Scene),
+    ("material", Reads::Scene),
+    ("light", Reads::Scene),
+    ("colormap", Reads::Scene),
+    ("withWeight", Reads::Nothing),
     ("cubeCase", Reads::Volume),
     ("caseTriangles", Reads::Nothing),
     ("cubeTriangle", Reads::Volume),
