@@ -123,6 +123,10 @@ pub struct SceneRequest {
     pub color_by: Option<PathBuf>,
     pub iso_pipeline: Option<PathBuf>,
     pub fuse: bool,
+    /// The pipeline renders a volume directly (it reads `volume.*` besides
+    /// the camera): the volume goes to the functors with the scene, and the
+    /// scene is its isosurface with `--iso`, else the volume's box.
+    pub render_volume: bool,
 }
 
 /// What a rank's share of a distributed run changes in its set-up.
@@ -152,6 +156,9 @@ impl SceneSetup {
         progress: &Progress,
         distribution: &Distribution,
     ) -> Result<SceneSetup, String> {
+        if request.render_volume {
+            return distribution.agree(volume_rendering(request, library, progress, distribution));
+        }
         let (scene, origin, share) = load_share(request, library, progress, distribution)?;
         distribution.agree(SceneSetup::with_scene(
             Arc::new(scene),
@@ -398,6 +405,116 @@ pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, MeshMaterials), String> {
     }
 }
 
+/// The set-up of a pipeline that renders the volume itself: the volume with
+/// the functors, the scalar range its values' by default, and as the scene
+/// its isosurface (`--iso`: surfaces and volume in one image) or its box.
+fn volume_rendering(
+    request: &SceneRequest,
+    library: &FunctorLibrary,
+    progress: &Progress,
+    distribution: &Distribution,
+) -> Result<SceneSetup, String> {
+    let spec = match &request.scenes[..] {
+        [spec] if spec.is_volume(request.raw.as_deref()) => spec,
+        _ => {
+            return Err(
+                "error: a pipeline that reads `volume.*` and the camera renders a volume: give one volume as the scene (a .nii or .nii.gz file, a raw brick with --raw, or a generated rm:X,Y,Z, pbte:X,Y,Z, sphere:X,Y,Z)"
+                    .into(),
+            )
+        }
+    };
+    if distribution.size() > 1 {
+        return Err("error: volume rendering runs in one process (not under mpirun yet)".into());
+    }
+    let volume = load_volume_spec(request, spec, progress)?;
+    let range = dpp_tracer::shading::default_scalar_range(&volume.values);
+    let (mesh, origin) = match request.iso {
+        Some(level) => {
+            let iso = IsoRequest {
+                level,
+                pipeline: request.iso_pipeline.clone(),
+                fuse: request.fuse,
+            };
+            progress.phase(format!("isosurface at level {level}"));
+            let mesh = volume_setup::isosurface(volume.clone(), &iso, library)?;
+            (
+                mesh,
+                format!("{} and its isosurface at {level}", spec.name()),
+            )
+        }
+        None => (box_mesh(&volume.bounds()), spec.name()),
+    };
+    let scene = trace_scene(mesh, MeshMaterials::default(), progress, |e| {
+        format!("error: the surface of `{}`: {e}", spec.name())
+    })?;
+    let share = RankShare {
+        scalar_range: Some(range),
+        traced_tiles: None,
+    };
+    let description = format!(
+        "the volume {} ({}x{}x{} samples)",
+        spec.name(),
+        volume.dims.x,
+        volume.dims.y,
+        volume.dims.z
+    );
+    let mut setup = SceneSetup::with_scene(Arc::new(scene), &origin, request, &share)?;
+    setup.resources.volume = Some(Arc::new(volume));
+    setup.uniforms = setup.resources.uniforms();
+    setup.description = format!("{description}, {}", setup.description);
+    Ok(setup)
+}
+
+/// The 12 triangles of a box: the scene of a volume rendered without a
+/// surface (the camera's standard views frame it).
+fn box_mesh(bounds: &dpp_tracer::mesh::Bounds) -> TriangleMesh {
+    let corner = |i: u32| {
+        let pick = |bit: u32, lo: f32, hi: f32| if i >> bit & 1 == 1 { hi } else { lo };
+        Vec3::new(
+            pick(0, bounds.min.x, bounds.max.x),
+            pick(1, bounds.min.y, bounds.max.y),
+            pick(2, bounds.min.z, bounds.max.z),
+        )
+    };
+    // Two triangles per face, counter-clockwise seen from outside.
+    let faces = [
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+    ];
+    TriangleMesh {
+        positions: (0..8).map(corner).collect(),
+        triangles: faces
+            .iter()
+            .flat_map(|[a, b, c, d]| [[*a, *b, *c], [*a, *c, *d]])
+            .collect(),
+        normals: None,
+        scalars: None,
+    }
+}
+
+/// A volume scene's samples: a generated data set or a file.
+fn load_volume_spec(
+    request: &SceneRequest,
+    spec: &SceneSpec,
+    progress: &Progress,
+) -> Result<dpp_tracer::volume::Volume, String> {
+    match spec {
+        SceneSpec::Generated(dataset, grid) => {
+            progress.phase(format!("generating {}", spec.name()));
+            (dataset.generate(glam::UVec3::from(*grid))).map_err(|e| format!("error: {e}"))
+        }
+        SceneSpec::File(path) => {
+            progress.phase(format!("loading {}", path.display()));
+            volume_setup::load_volume(path, request.raw.as_deref())
+        }
+        SceneSpec::Builtin(_) => Err("error: the built-in scene is not a volume".into()),
+    }
+}
+
 /// The isosurface of a volume, coloured by height or by a second field.
 pub fn volume_scene(
     request: &SceneRequest,
@@ -405,17 +522,7 @@ pub fn volume_scene(
     library: &FunctorLibrary,
     progress: &Progress,
 ) -> Result<TraceScene, String> {
-    let volume = match spec {
-        SceneSpec::Generated(dataset, grid) => {
-            progress.phase(format!("generating {}", spec.name()));
-            (dataset.generate(glam::UVec3::from(*grid))).map_err(|e| format!("error: {e}"))?
-        }
-        SceneSpec::File(path) => {
-            progress.phase(format!("loading {}", path.display()));
-            volume_setup::load_volume(path, request.raw.as_deref())?
-        }
-        SceneSpec::Builtin(_) => return Err("error: the built-in scene is not a volume".into()),
-    };
+    let volume = load_volume_spec(request, spec, progress)?;
     let level = iso_level(request, spec, volume.value_range())?;
     let iso = IsoRequest {
         level,

@@ -27,14 +27,19 @@ pub mod intersect;
 #[cfg(feature = "embree")]
 pub mod intersect_embree;
 pub mod isosurface;
+pub mod march_live;
 pub mod normal_color;
 pub mod occ_ray_gen;
 pub mod occluded;
+pub mod over_background;
 pub mod reflect;
 pub mod shader;
 pub mod shadow_ray;
 pub mod surface;
 pub mod visible_lights;
+pub mod volume_entry;
+pub mod volume_march;
+pub mod volume_render;
 pub mod wgsl;
 
 use crate::bvh::{HitRecord, Ray};
@@ -697,7 +702,8 @@ pub(crate) mod test_support {
 
         pub fn with_scene(scene: TraceScene) -> Fixture {
             let mut library = FunctorLibrary::default();
-            register_tracer_functors(&mut library);
+            let records = register_tracer_functors(&mut library);
+            crate::register_volume_render_functors(&mut library, records.ray);
             let scene = Arc::new(scene);
             let camera =
                 Camera::new(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, Vec3::Y, 90.0, 4, 3).unwrap();
