@@ -113,6 +113,10 @@ pub struct BenchArgs {
     #[arg(long = "scalar-range", value_name = "A,B", allow_hyphen_values = true,
           value_parser = |s: &str| dpp_tracer::shading::parse_scalar_range(s).map_err(|e| e.to_string()))]
     scalar_range: Option<[f32; 2]>,
+    /// The volume workload's params: `--set block=0` (only `block`, which
+    /// the hand-written loop has no counterpart of, keeps the images equal).
+    #[arg(long = "set", value_name = "NAME=VALUE", value_parser = crate::parse_assignment)]
+    set: Vec<(String, String)>,
     /// Unmeasured rounds before the measured ones, per view, workload and plan.
     #[arg(long, default_value_t = 1)]
     warmup: u32,
@@ -225,8 +229,10 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
                 .into(),
         );
     }
-    if (args.transfer.is_some() || args.scalar_range.is_some()) && !volume {
-        return Err("error: --transfer and --scalar-range are for --workloads volume".into());
+    if (args.transfer.is_some() || args.scalar_range.is_some() || !args.set.is_empty()) && !volume {
+        return Err(
+            "error: --transfer, --scalar-range and --set are for --workloads volume".into(),
+        );
     }
     for name in names.iter().filter(|_| !volume) {
         match name.trim_start_matches("workload").parse::<u32>() {

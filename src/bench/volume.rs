@@ -4,7 +4,7 @@
 //! primitives; the same sampling code, [`dpp_tracer::functors::volume_render`],
 //! so the images must agree): what writing the algorithm as primitives costs.
 
-use super::{compile, measure, ms, progress_bar, BenchArgs, Setup};
+use super::{measure, ms, progress_bar, BenchArgs, Setup};
 use crate::scene_setup::{SceneRequest, SceneSetup, SceneSpec};
 use crate::Failure;
 use dpp_gpu::GpuContext;
@@ -43,8 +43,14 @@ pub(super) fn bench_volume(
     distribution: &crate::distributed::Distribution,
 ) -> Result<(), Failure> {
     let path = setup.pipelines.join("volume.dpp");
-    let fused = compile(&path, library, true)?;
-    let unfused = compile(&path, library, false)?;
+    let compile = |fuse: bool| {
+        let options = dpp_runtime::CompileOptions {
+            fuse,
+            overrides: args.set.clone(),
+        };
+        crate::compile(&path, library, &options)
+    };
+    let (fused, unfused) = (compile(true)?, compile(false)?);
     let rounds = u64::from(args.warmup + args.rounds) * if gpu.is_some() { 3 } else { 2 };
     let progress = progress_bar(setup.scenes.len() as u64 * setup.views.len() as u64 * rounds);
     let mut rows = Vec::new();
@@ -105,9 +111,17 @@ pub(super) fn bench_volume(
     }
     progress.finish_and_clear();
     let backend = if gpu.is_some() { "GPU" } else { "CPU" };
+    let set: Vec<String> = args
+        .set
+        .iter()
+        .map(|(n, v)| format!(" --set {n}={v}"))
+        .collect();
     let mut text = format!(
-        "volume.dpp at {}x{} ({backend} backend; the loop on the CPU), mean of {} frames\n\n",
-        args.size.0, args.size.1, args.rounds
+        "volume.dpp{} at {}x{} ({backend} backend; the loop on the CPU), mean of {} frames\n\n",
+        set.concat(),
+        args.size.0,
+        args.size.1,
+        args.rounds
     );
     text.push_str("| scene | view | fused ms (fps) | unfused ms (fps) | hand-written loop ms (fps) | fused / loop | largest image difference |\n");
     text.push_str("| --- | --- | --- | --- | --- | --- | --- |\n");

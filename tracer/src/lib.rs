@@ -102,8 +102,10 @@ pub fn register_isosurface_functors(library: &mut FunctorLibrary) -> RecordId {
 }
 
 /// Registers the `March` record and the volume-rendering functors
-/// (`volumeEntry`, `volumeMarch`, `marchLive`, `overBackground`); they read
-/// the `Ray` record of [`register_tracer_functors`]. Returns the `March` id.
+/// (`volumeEntry`, `volumeMarch`, `marchLive`, `overBackground`, and for
+/// empty-space skipping `cellRange`, `cellBlock`, `transparent`,
+/// `marchBlock`, `skipEmpty`); they read the `Ray` record of
+/// [`register_tracer_functors`]. Returns the `March` id.
 pub fn register_volume_render_functors(library: &mut FunctorLibrary, ray: RecordId) -> RecordId {
     use functors::*;
     let march = volume_render::register_march_record(&mut library.records);
@@ -112,6 +114,11 @@ pub fn register_volume_render_functors(library: &mut FunctorLibrary, ray: Record
         Arc::new(volume_march::VolumeMarch::new(march)),
         Arc::new(march_live::MarchLive::new(march)),
         Arc::new(over_background::OverBackground::new()),
+        Arc::new(cell_range::CellRange::new()),
+        Arc::new(cell_block::CellBlock::new()),
+        Arc::new(transparent::Transparent::new()),
+        Arc::new(march_block::MarchBlock::new(march)),
+        Arc::new(skip_empty::SkipEmpty::new(march)),
     ];
     for functor in functors {
         library.register(functor);

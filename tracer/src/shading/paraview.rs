@@ -41,14 +41,13 @@ struct Preset {
 /// The preset of `path` called `name` (`None`: the first preset with
 /// `RGBPoints`). Errors name the file and say what is wrong.
 pub fn load_preset(path: &Path, name: Option<&str>) -> Result<ColorMap, ShadingError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ShadingError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    parse_preset(&text, name).map_err(|message| ShadingError::SceneFile {
+    let failed = |message: String| ShadingError::SceneFile {
         origin: path.display().to_string(),
         message,
-    })
+    };
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| failed(format!("cannot read the colour-map preset: {e}")))?;
+    parse_preset(&text, name).map_err(failed)
 }
 
 /// [`load_preset`] of JSON text.

@@ -5,7 +5,9 @@
 //! its 0-to-1 opacity ramp, opacity correction, front-to-back compositing,
 //! early termination, the background), on a sphere's distance field, a
 //! Gaussian blob and a linear ramp; on the CPU and GPU backends, fused and
-//! not. A constant field checks one pixel by hand: `1 - (1 - a)^(n·dt/unit)`.
+//! not, with empty-space skipping (blocks of 2 cells, of which the fields'
+//! transparent parts make many empty) and without. A constant field checks
+//! one pixel by hand: `1 - (1 - a)^(n·dt/unit)`.
 
 use dpp_gpu::{gpu_for_tests, run_plan_gpu, GpuRunContext};
 use dpp_runtime::compile::{compile_file, CompileOptions};
@@ -68,13 +70,14 @@ fn resources(volume: Volume, range: [f32; 2]) -> TraceResources {
 }
 
 /// `(image, alpha)`: the pipeline's sRGB image and its opacity per pixel.
-fn render(resources: &TraceResources, fuse: bool, gpu: bool) -> (Vec<Vec3>, Vec<f32>) {
+fn render(resources: &TraceResources, fuse: bool, gpu: bool, block: u32) -> (Vec<Vec3>, Vec<f32>) {
     let library = dpp_tracer::functor_library();
     let options = CompileOptions {
         fuse,
         overrides: vec![
             ("step".into(), format!("{STEP:?}")),
             ("cutoff".into(), format!("{CUTOFF:?}")),
+            ("block".into(), block.to_string()),
         ],
     };
     let pipeline = Path::new(env!("CARGO_MANIFEST_DIR")).join("../pipelines/volume.dpp");
@@ -228,12 +231,9 @@ fn the_volume_pipeline_matches_a_brute_force_marcher() {
             expected.iter().any(|(_, a)| *a > 0.3),
             "{name}: the volume is seen"
         );
-        for fuse in [true, false] {
-            compare(
-                &format!("{name}, fuse {fuse}"),
-                &render(&resources, fuse, false),
-                &expected,
-            );
+        for (fuse, block) in [(true, 0), (false, 0), (true, 2), (false, 2)] {
+            let what = format!("{name}, fuse {fuse}, block {block}");
+            compare(&what, &render(&resources, fuse, false, block), &expected);
         }
     }
 }
@@ -247,8 +247,8 @@ fn the_gpu_backend_renders_the_same_volume() {
         let expected = reference(&volume, range);
         let resources = resources(volume, range);
         let (cpu, gpu) = (
-            render(&resources, true, false),
-            render(&resources, true, true),
+            render(&resources, true, false, 2),
+            render(&resources, true, true, 2),
         );
         compare(&format!("{name} on the GPU"), &gpu, &expected);
         let largest = (cpu.0.iter().zip(&gpu.0))
@@ -269,7 +269,7 @@ fn a_constant_field_has_the_opacity_of_its_depth() {
     let mut resources = resources(volume, [0.0, 1.0]);
     let camera = Camera::new(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 10.0, 3, 3).unwrap();
     resources.camera = Arc::new(CameraSetup::new(camera));
-    let (_, alpha) = render(&resources, true, false);
+    let (_, alpha) = render(&resources, true, false, 0);
     let unit: f64 = 1.0 / 16.0;
     let dt = STEP * unit;
     let n = (1.2 / dt + 1e-9).floor() + 1.0;

@@ -34,6 +34,20 @@
 //!   the march ends (`t = +inf`).
 //! - A march is **live** while `t <= tEnd`.
 //! - **Background**: a pixel's colour is `color + (1 - A) background`.
+//!
+//! # Empty-space skipping
+//!
+//! Blocks of `size`³ cells (the last ones along an axis may be smaller):
+//! block `b` covers sample coordinates `b size ..= (b + 1) size` on each axis,
+//! so every sample a trilinear value inside it reads is one of its own. A
+//! block's value range is the reduction of its cells' ranges (`cellRange`
+//! gives `(min, -max)` of a cell's 8 corners so that one `min` reduces both);
+//! it is *transparent* when the transfer function's opacity is 0 over all of
+//! it ([`ColorMap::transparent_between`]). A march in a transparent block
+//! (`marchBlock` is the block of `g(t)`) jumps to the first `t + n step`
+//! (`n >= 1`) past the block's far side: its samples there would have added
+//! nothing, and the samples after it stay on the same lattice (up to the
+//! rounding of `n step` against `n` additions of `step`).
 
 use crate::functors::occ_ray_gen::pcg_hash;
 use crate::functors::record_fields_mut;
@@ -261,6 +275,50 @@ pub fn march(volume: &Volume, map: &ColorMap, params: &MarchParams, m: MarchReco
         }
     }
     m
+}
+
+/// Skipping blocks per axis: the cells divided into blocks of `size`, rounded up.
+pub fn block_dims(volume: &Volume, size: u32) -> UVec3 {
+    let cells = volume.cell_dims().max(UVec3::ONE);
+    (cells + UVec3::splat(size - 1)) / size
+}
+
+/// The skipping block of sample coordinates `g` (clamped into the grid of blocks).
+#[inline]
+pub fn point_block(volume: &Volume, g: Vec3, size: u32) -> UVec3 {
+    let last = block_dims(volume, size) - UVec3::ONE;
+    (g / size as f32).max(Vec3::ZERO).as_uvec3().min(last)
+}
+
+/// The index of block `b` (x fastest).
+#[inline]
+pub fn block_index(volume: &Volume, b: UVec3, size: u32) -> u32 {
+    let dims = block_dims(volume, size);
+    b.x + dims.x * (b.y + dims.y * b.z)
+}
+
+/// The march moved past the far side of the block it is in, on its lattice
+/// of samples `step` apart.
+#[inline]
+pub fn skip_block(volume: &Volume, m: MarchRecord, size: u32, step: f32) -> MarchRecord {
+    let g = m.origin + m.dir * m.t;
+    let b = point_block(volume, g, size);
+    let last = volume.dims.saturating_sub(UVec3::ONE).as_vec3();
+    let low = (b * size).as_vec3();
+    let high = ((b + UVec3::ONE) * size).as_vec3().min(last);
+    let mut exit = f32::INFINITY;
+    for axis in 0..3 {
+        if m.dir[axis] != 0.0 {
+            let t0 = (low[axis] - m.origin[axis]) / m.dir[axis];
+            let t1 = (high[axis] - m.origin[axis]) / m.dir[axis];
+            exit = exit.min(t0.max(t1));
+        }
+    }
+    let steps = ((exit - m.t) / step).ceil().max(1.0);
+    MarchRecord {
+        t: m.t + steps * step,
+        ..m
+    }
 }
 
 /// `1 - (1 - a)^ratio`, exact at `a = 0` and `a = 1`.

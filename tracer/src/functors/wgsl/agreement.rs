@@ -1438,6 +1438,80 @@ fn volume_render_cases<'e>(env: &'e Env, rng: &mut SplitMix64, cases: &mut Vec<C
         1,
         "step",
     ));
+    // Empty-space skipping: every cell's range and block, blocks of 1 to 3
+    // cells (the last ones cut by the border), ranges around the opacity's
+    // zero end, marches in and out of empty blocks.
+    let volume = env.trace_resources().volume.clone().unwrap();
+    let cells = iota(volume.cell_count() as usize);
+    cases.push(agree(
+        env,
+        "cellRange",
+        "every cell",
+        &[&cells],
+        &[],
+        1,
+        INTEGERS,
+    ));
+    for size in [1, 3] {
+        cases.push(agree(
+            env,
+            "cellBlock",
+            &format!("every cell, size {size}"),
+            &[&cells],
+            &[int(size)],
+            1,
+            INTEGERS,
+        ));
+        cases.push(agree(
+            env,
+            "marchBlock",
+            &format!("marches, size {size}"),
+            &[&rays],
+            &[int(size)],
+            1,
+            INTEGERS,
+        ));
+        let empty = Column::Bool((0..rays.len()).map(|i| i % 3 != 0).collect());
+        cases.push(agree(
+            env,
+            "skipEmpty",
+            &format!("marches, size {size}"),
+            &[&rays, &empty],
+            &[int(size), step],
+            1,
+            MARCH,
+        ));
+    }
+    cases.push(fails(
+        env,
+        "cellBlock",
+        "size 0",
+        &[&cells],
+        &[int(0)],
+        1,
+        "size",
+    ));
+    let ranges: Vec<glam::Vec2> = (0..400)
+        .map(|i| {
+            let lo = 0.25 + 0.1 * rng.next_f32();
+            let hi = lo
+                + if i % 4 == 0 {
+                    -0.01
+                } else {
+                    0.2 * rng.next_f32()
+                };
+            glam::Vec2::new(lo, -hi)
+        })
+        .collect();
+    cases.push(agree(
+        env,
+        "transparent",
+        "ranges about the opacity's zero end",
+        &[&Column::Vec2(ranges)],
+        &[],
+        1,
+        INTEGERS,
+    ));
     let alphas = Column::F32((0..300).map(|_| rng.next_f32()).collect());
     cases.push(agree(
         env,

@@ -33,7 +33,7 @@ enum Reads {
     Nothing,
 }
 
-const TWINS: [(&str, Reads); 20] = [
+const TWINS: [(&str, Reads); 25] = [
     ("cameraRay", Reads::Scene),
     ("intersect", Reads::Scene),
     ("occluded", Reads::Scene),
@@ -54,6 +54,11 @@ const TWINS: [(&str, Reads); 20] = [
     ("volumeMarch", Reads::Scene),
     ("marchLive", Reads::Nothing),
     ("overBackground", Reads::Scene),
+    ("cellRange", Reads::Scene),
+    ("cellBlock", Reads::Scene),
+    ("transparent", Reads::Scene),
+    ("marchBlock", Reads::Scene),
+    ("skipEmpty", Reads::Scene),
 ];
 
 /// The fixture's library with the isosurface functors too, and a small
