@@ -699,12 +699,12 @@ fn run_scene(
                 )));
             }
         };
-        let traced_only = [
-            ("--iso", args.iso.is_some()),
-            ("--color-by", args.color_by.is_some()),
-            ("--iso-pipeline", args.iso_pipeline.is_some()),
+        let given = [
+            args.iso.is_some(),
+            args.color_by.is_some(),
+            args.iso_pipeline.is_some(),
         ];
-        if let Some((option, _)) = traced_only.iter().find(|(_, given)| *given) {
+        if let Some(option) = scene_setup::isosurface_option(given) {
             return Err(Failure::Input(format!(
                 "error: {option} is for pipelines that trace a volume's isosurface; {pipeline} reads the volume itself ({}): set its params with --set NAME=VALUE",
                 volume_reads.join(", ")

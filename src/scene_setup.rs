@@ -124,8 +124,7 @@ pub struct SceneRequest {
     pub iso_pipeline: Option<PathBuf>,
     pub fuse: bool,
     /// The pipeline renders a volume directly (it reads `volume.*` besides
-    /// the camera): the volume goes to the functors with the scene, and the
-    /// scene is its isosurface with `--iso`, else the volume's box.
+    /// the camera): the volume goes to the functors, its box is the scene.
     pub render_volume: bool,
 }
 
@@ -157,7 +156,7 @@ impl SceneSetup {
         distribution: &Distribution,
     ) -> Result<SceneSetup, String> {
         if request.render_volume {
-            return distribution.agree(volume_rendering(request, library, progress, distribution));
+            return distribution.agree(volume_rendering(request, progress, distribution));
         }
         let (scene, origin, share) = load_share(request, library, progress, distribution)?;
         distribution.agree(SceneSetup::with_scene(
@@ -406,11 +405,10 @@ pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, MeshMaterials), String> {
 }
 
 /// The set-up of a pipeline that renders the volume itself: the volume with
-/// the functors, the scalar range its values' by default, and as the scene
-/// its isosurface (`--iso`: surfaces and volume in one image) or its box.
+/// the functors, the scalar range its values' by default, and its box as the
+/// scene.
 fn volume_rendering(
     request: &SceneRequest,
-    library: &FunctorLibrary,
     progress: &Progress,
     distribution: &Distribution,
 ) -> Result<SceneSetup, String> {
@@ -426,27 +424,25 @@ fn volume_rendering(
     if distribution.size() > 1 {
         return Err("error: volume rendering runs in one process (not under mpirun yet)".into());
     }
+    let given = [
+        request.iso.is_some(),
+        request.color_by.is_some(),
+        request.iso_pipeline.is_some(),
+    ];
+    if let Some(option) = isosurface_option(given) {
+        return Err(format!(
+            "error: {option} is for pipelines that trace a volume's isosurface; a volume-rendering pipeline renders the volume itself (its params: --set NAME=VALUE)"
+        ));
+    }
     let volume = load_volume_spec(request, spec, progress)?;
     let range = dpp_tracer::shading::default_scalar_range(&volume.values);
-    let (mesh, origin) = match request.iso {
-        Some(level) => {
-            let iso = IsoRequest {
-                level,
-                pipeline: request.iso_pipeline.clone(),
-                fuse: request.fuse,
-            };
-            progress.phase(format!("isosurface at level {level}"));
-            let mesh = volume_setup::isosurface(volume.clone(), &iso, library)?;
-            (
-                mesh,
-                format!("{} and its isosurface at {level}", spec.name()),
-            )
-        }
-        None => (box_mesh(&volume.bounds()), spec.name()),
-    };
-    let scene = trace_scene(mesh, MeshMaterials::default(), progress, |e| {
-        format!("error: the surface of `{}`: {e}", spec.name())
-    })?;
+    let origin = spec.name();
+    let scene = trace_scene(
+        box_mesh(&volume.bounds()),
+        MeshMaterials::default(),
+        progress,
+        |e| format!("error: the box of `{origin}`: {e}"),
+    )?;
     let share = RankShare {
         scalar_range: Some(range),
         traced_tiles: None,
@@ -463,6 +459,18 @@ fn volume_rendering(
     setup.uniforms = setup.resources.uniforms();
     setup.description = format!("{description}, {}", setup.description);
     Ok(setup)
+}
+
+/// The first of `--iso`, `--color-by`, `--iso-pipeline` that `given` says
+/// was given: options for tracing a volume's isosurface, which a pipeline
+/// that reads the volume itself refuses.
+pub fn isosurface_option(given: [bool; 3]) -> Option<&'static str> {
+    let options = ["--iso", "--color-by", "--iso-pipeline"];
+    options
+        .into_iter()
+        .zip(given)
+        .find(|(_, given)| *given)
+        .map(|(option, _)| option)
 }
 
 /// The 12 triangles of a box: the scene of a volume rendered without a

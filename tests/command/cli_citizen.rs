@@ -317,6 +317,10 @@ fn volume_rendering_says_what_is_wrong_with_its_input() {
         assert_eq!(code, Some(2), "{transfer}: {all}");
         assert!(all.contains(expected), "{transfer}: {all}");
     }
+    // The renderer reads the volume itself: no isosurface level.
+    let (code, all) = run(&["sphere:12", "--size", "16x12", "--iso", "0"]);
+    assert_eq!(code, Some(2), "{all}");
+    assert!(all.contains("--iso is for pipelines that trace"), "{all}");
     let (code, all) = run(&[
         "sphere:12",
         "--size",
