@@ -148,6 +148,10 @@ struct RunArgs {
     /// Colour map over the scalar: viridis, inferno, magma, plasma, cividis, turbo, cool-to-warm, grey.
     #[arg(long)]
     colormap: Option<String>,
+    /// A volume's transfer function: a colour map name (opacity ramps 0 to 1)
+    /// or a ParaView colour-map preset (`FILE.json`, `FILE.json:NAME`).
+    #[arg(long, value_name = "FILE.json|NAME")]
+    transfer: Option<String>,
     /// The scalar values at the two ends of the colour map: `A,B`.
     #[arg(long = "scalar-range", value_name = "A,B", allow_hyphen_values = true)]
     scalar_range: Option<String>,
@@ -646,7 +650,11 @@ fn run_scene(
         .map(|text| scene_setup::SceneSpec::parse(text))
         .collect::<Result<Vec<_>, _>>()
         .map_err(Failure::Input)?;
-    let scene = if volume_reads.is_empty() {
+    let traced: Vec<String> = named("camera").into_iter().chain(named("scene")).collect();
+    // A pipeline that reads the volume and the camera renders the volume
+    // itself (pipelines/volume.dpp); one that reads only the volume runs on
+    // its samples (marching cubes).
+    let scene = if volume_reads.is_empty() || !traced.is_empty() {
         let shading = shading_overrides(args).map_err(Failure::Input)?;
         let setup = scene_setup::SceneSetup::new(
             &scene_setup::SceneRequest {
@@ -664,6 +672,7 @@ fn run_scene(
                 color_by: args.color_by.clone(),
                 iso_pipeline: args.iso_pipeline.clone(),
                 fuse: !args.compile.no_fuse,
+                render_volume: !volume_reads.is_empty(),
             },
             library,
             progress,
@@ -672,14 +681,6 @@ fn run_scene(
         .map_err(Failure::Input)?;
         RunScene::Traced(Box::new(setup))
     } else {
-        let traced: Vec<String> = named("camera").into_iter().chain(named("scene")).collect();
-        if !traced.is_empty() {
-            return Err(Failure::Input(format!(
-                "error: {pipeline} reads {} and {}: dpp run gives a pipeline either a volume (`volume.*`) or a traced scene (`camera.*`, `scene.*`), not both",
-                volume_reads.join(", "),
-                traced.join(", ")
-            )));
-        }
         let volume = match &scenes[..] {
             [scene_setup::SceneSpec::File(path)]
                 if volume_setup::is_volume_path(path) || args.raw.is_some() =>
@@ -698,12 +699,12 @@ fn run_scene(
                 )));
             }
         };
-        let traced_only = [
-            ("--iso", args.iso.is_some()),
-            ("--color-by", args.color_by.is_some()),
-            ("--iso-pipeline", args.iso_pipeline.is_some()),
+        let given = [
+            args.iso.is_some(),
+            args.color_by.is_some(),
+            args.iso_pipeline.is_some(),
         ];
-        if let Some((option, _)) = traced_only.iter().find(|(_, given)| *given) {
+        if let Some(option) = scene_setup::isosurface_option(given) {
             return Err(Failure::Input(format!(
                 "error: {option} is for pipelines that trace a volume's isosurface; {pipeline} reads the volume itself ({}): set its params with --set NAME=VALUE",
                 volume_reads.join(", ")
@@ -791,6 +792,7 @@ fn shading_overrides(args: &RunArgs) -> Result<dpp_tracer::ShadingOverrides, Str
     Ok(dpp_tracer::ShadingOverrides {
         lights: (!lights.is_empty()).then_some(lights),
         colormap: args.colormap.clone(),
+        transfer: args.transfer.clone(),
         scalar_range,
         background,
     })

@@ -123,6 +123,9 @@ pub struct SceneRequest {
     pub color_by: Option<PathBuf>,
     pub iso_pipeline: Option<PathBuf>,
     pub fuse: bool,
+    /// The pipeline renders a volume directly (it reads `volume.*` besides
+    /// the camera): the volume goes to the functors, its box is the scene.
+    pub render_volume: bool,
 }
 
 /// What a rank's share of a distributed run changes in its set-up.
@@ -152,6 +155,9 @@ impl SceneSetup {
         progress: &Progress,
         distribution: &Distribution,
     ) -> Result<SceneSetup, String> {
+        if request.render_volume {
+            return distribution.agree(volume_rendering(request, progress, distribution));
+        }
         let (scene, origin, share) = load_share(request, library, progress, distribution)?;
         distribution.agree(SceneSetup::with_scene(
             Arc::new(scene),
@@ -398,6 +404,125 @@ pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, MeshMaterials), String> {
     }
 }
 
+/// The set-up of a pipeline that renders the volume itself: the volume with
+/// the functors, the scalar range its values' by default, and its box as the
+/// scene.
+fn volume_rendering(
+    request: &SceneRequest,
+    progress: &Progress,
+    distribution: &Distribution,
+) -> Result<SceneSetup, String> {
+    let spec = match &request.scenes[..] {
+        [spec] if spec.is_volume(request.raw.as_deref()) => spec,
+        _ => {
+            return Err(
+                "error: a pipeline that reads `volume.*` and the camera renders a volume: give one volume as the scene (a .nii or .nii.gz file, a raw brick with --raw, or a generated rm:X,Y,Z, pbte:X,Y,Z, sphere:X,Y,Z)"
+                    .into(),
+            )
+        }
+    };
+    if distribution.size() > 1 {
+        return Err("error: volume rendering runs in one process (not under mpirun yet)".into());
+    }
+    let given = [
+        request.iso.is_some(),
+        request.color_by.is_some(),
+        request.iso_pipeline.is_some(),
+    ];
+    if let Some(option) = isosurface_option(given) {
+        return Err(format!(
+            "error: {option} is for pipelines that trace a volume's isosurface; a volume-rendering pipeline renders the volume itself (its params: --set NAME=VALUE)"
+        ));
+    }
+    let volume = load_volume_spec(request, spec, progress)?;
+    let range = dpp_tracer::shading::default_scalar_range(&volume.values);
+    let origin = spec.name();
+    let scene = trace_scene(
+        box_mesh(&volume.bounds()),
+        MeshMaterials::default(),
+        progress,
+        |e| format!("error: the box of `{origin}`: {e}"),
+    )?;
+    let share = RankShare {
+        scalar_range: Some(range),
+        traced_tiles: None,
+    };
+    let description = format!(
+        "the volume {} ({}x{}x{} samples)",
+        spec.name(),
+        volume.dims.x,
+        volume.dims.y,
+        volume.dims.z
+    );
+    let mut setup = SceneSetup::with_scene(Arc::new(scene), &origin, request, &share)?;
+    setup.resources.volume = Some(Arc::new(volume));
+    setup.uniforms = setup.resources.uniforms();
+    setup.description = format!("{description}, {}", setup.description);
+    Ok(setup)
+}
+
+/// The first of `--iso`, `--color-by`, `--iso-pipeline` that `given` says
+/// was given: options for tracing a volume's isosurface, which a pipeline
+/// that reads the volume itself refuses.
+pub fn isosurface_option(given: [bool; 3]) -> Option<&'static str> {
+    let options = ["--iso", "--color-by", "--iso-pipeline"];
+    options
+        .into_iter()
+        .zip(given)
+        .find(|(_, given)| *given)
+        .map(|(option, _)| option)
+}
+
+/// The 12 triangles of a box: the scene of a volume rendered without a
+/// surface (the camera's standard views frame it).
+fn box_mesh(bounds: &dpp_tracer::mesh::Bounds) -> TriangleMesh {
+    let corner = |i: u32| {
+        let pick = |bit: u32, lo: f32, hi: f32| if i >> bit & 1 == 1 { hi } else { lo };
+        Vec3::new(
+            pick(0, bounds.min.x, bounds.max.x),
+            pick(1, bounds.min.y, bounds.max.y),
+            pick(2, bounds.min.z, bounds.max.z),
+        )
+    };
+    // Two triangles per face, counter-clockwise seen from outside.
+    let faces = [
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+    ];
+    TriangleMesh {
+        positions: (0..8).map(corner).collect(),
+        triangles: faces
+            .iter()
+            .flat_map(|[a, b, c, d]| [[*a, *b, *c], [*a, *c, *d]])
+            .collect(),
+        normals: None,
+        scalars: None,
+    }
+}
+
+/// A volume scene's samples: a generated data set or a file.
+fn load_volume_spec(
+    request: &SceneRequest,
+    spec: &SceneSpec,
+    progress: &Progress,
+) -> Result<dpp_tracer::volume::Volume, String> {
+    match spec {
+        SceneSpec::Generated(dataset, grid) => {
+            progress.phase(format!("generating {}", spec.name()));
+            (dataset.generate(glam::UVec3::from(*grid))).map_err(|e| format!("error: {e}"))
+        }
+        SceneSpec::File(path) => {
+            progress.phase(format!("loading {}", path.display()));
+            volume_setup::load_volume(path, request.raw.as_deref())
+        }
+        SceneSpec::Builtin(_) => Err("error: the built-in scene is not a volume".into()),
+    }
+}
+
 /// The isosurface of a volume, coloured by height or by a second field.
 pub fn volume_scene(
     request: &SceneRequest,
@@ -405,17 +530,7 @@ pub fn volume_scene(
     library: &FunctorLibrary,
     progress: &Progress,
 ) -> Result<TraceScene, String> {
-    let volume = match spec {
-        SceneSpec::Generated(dataset, grid) => {
-            progress.phase(format!("generating {}", spec.name()));
-            (dataset.generate(glam::UVec3::from(*grid))).map_err(|e| format!("error: {e}"))?
-        }
-        SceneSpec::File(path) => {
-            progress.phase(format!("loading {}", path.display()));
-            volume_setup::load_volume(path, request.raw.as_deref())?
-        }
-        SceneSpec::Builtin(_) => return Err("error: the built-in scene is not a volume".into()),
-    };
+    let volume = load_volume_spec(request, spec, progress)?;
     let level = iso_level(request, spec, volume.value_range())?;
     let iso = IsoRequest {
         level,

@@ -18,6 +18,7 @@
 mod across_ranks;
 mod chart;
 mod report;
+mod volume;
 
 use crate::distributed::Distribution;
 use crate::outputs::write_atomically;
@@ -100,9 +101,22 @@ pub struct BenchArgs {
     /// Standard views, comma-separated.
     #[arg(long, default_value = "front,back,zoom")]
     views: String,
-    /// Workloads to run (1, 2, 3), comma-separated.
+    /// Workloads to run (1, 2, 3), comma-separated; or `volume` alone:
+    /// pipelines/volume.dpp on volume scenes against a hand-written ray marcher.
     #[arg(long, default_value = "1,2,3")]
     workloads: String,
+    /// The volume workload's transfer function: a colour map name or a
+    /// ParaView preset (`FILE.json`, `FILE.json:NAME`).
+    #[arg(long, value_name = "FILE.json|NAME")]
+    transfer: Option<String>,
+    /// The volume workload's scalar range `A,B` (default: the volume's values).
+    #[arg(long = "scalar-range", value_name = "A,B", allow_hyphen_values = true,
+          value_parser = |s: &str| dpp_tracer::shading::parse_scalar_range(s).map_err(|e| e.to_string()))]
+    scalar_range: Option<[f32; 2]>,
+    /// The volume workload's params: `--set block=0` (only `block`, which
+    /// the hand-written loop has no counterpart of, keeps the images equal).
+    #[arg(long = "set", value_name = "NAME=VALUE", value_parser = crate::parse_assignment)]
+    set: Vec<(String, String)>,
     /// Unmeasured rounds before the measured ones, per view, workload and plan.
     #[arg(long, default_value_t = 1)]
     warmup: u32,
@@ -184,6 +198,8 @@ struct Setup {
     scenes: Vec<SceneSpec>,
     views: Vec<(String, StandardView)>,
     workloads: Vec<u32>,
+    /// `--workloads volume`: the volume workload instead of the three.
+    volume: bool,
     embree: bool,
     embree_test: EmbreeTest,
     pipelines: PathBuf,
@@ -205,19 +221,32 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
         return Err("error: --views names no view (front, back, zoom)".into());
     }
     let mut workloads = Vec::new();
-    for name in list(&args.workloads) {
+    let names = list(&args.workloads);
+    let volume = names.iter().any(|name| name == "volume");
+    if volume && names.len() > 1 {
+        return Err(
+            "error: --workloads volume runs alone (volume scenes, not the tracing workloads)"
+                .into(),
+        );
+    }
+    if (args.transfer.is_some() || args.scalar_range.is_some() || !args.set.is_empty()) && !volume {
+        return Err(
+            "error: --transfer, --scalar-range and --set are for --workloads volume".into(),
+        );
+    }
+    for name in names.iter().filter(|_| !volume) {
         match name.trim_start_matches("workload").parse::<u32>() {
             Ok(n @ 1..=3) if !workloads.contains(&n) => workloads.push(n),
             Ok(1..=3) => {}
             _ => {
                 return Err(format!(
-                    "error: --workloads: unknown workload `{name}`; the workloads are 1, 2 and 3"
+                    "error: --workloads: unknown workload `{name}`; the workloads are 1, 2 and 3, or volume alone"
                 ))
             }
         }
     }
-    if workloads.is_empty() {
-        return Err("error: --workloads names no workload (1, 2, 3)".into());
+    if workloads.is_empty() && !volume {
+        return Err("error: --workloads names no workload (1, 2, 3, or volume)".into());
     }
     let mut embree = false;
     for name in list(&args.engine) {
@@ -283,10 +312,26 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
             ));
         }
     }
+    if volume {
+        let path = pipelines.join("volume.dpp");
+        if !path.is_file() {
+            return Err(format!(
+                "error: cannot find {}; name the folder of the pipelines with --pipelines DIR",
+                path.display()
+            ));
+        }
+        if let Some(spec) = scenes.iter().find(|spec| !spec.is_volume(None)) {
+            return Err(format!(
+                "error: --workloads volume renders volumes: `{}` is not one (give rm:X,Y,Z, a .nii or .nii.gz file…)",
+                spec.name()
+            ));
+        }
+    }
     Ok(Setup {
         scenes,
         views,
         workloads,
+        volume,
         embree,
         embree_test: args.embree_test.unwrap_or(EmbreeTest::Robust),
         pipelines,
@@ -536,6 +581,9 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         }
     };
     let gpu = gpu.as_ref();
+    if setup.volume {
+        return volume::bench_volume(&args, &setup, library, &pool, gpu, &distribution);
+    }
 
     let mut plans = Vec::new();
     for &workload in &setup.workloads {
@@ -806,6 +854,7 @@ fn scene_request(spec: &SceneSpec, view: &str, size: (u32, u32), iso: Option<f32
         color_by: None,
         iso_pipeline: None,
         fuse: true,
+        render_volume: false,
     }
 }
 

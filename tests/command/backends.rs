@@ -103,6 +103,24 @@ fn comparison(name: &str) -> Option<Comparison> {
         },
         // Needs a volume: compared in tracer/tests/pipelines/isosurface.rs.
         "isosurface" => return None,
+        // A generated volume, shaded and jittered: every volume functor.
+        "volume" => Comparison {
+            args: [
+                "sphere:24",
+                "--size",
+                "64x48",
+                "--set",
+                "shade=true",
+                "--set",
+                "jitter=true",
+            ]
+            .iter()
+            .map(|s| s.to_string())
+            .collect(),
+            image: true,
+            prim: false,
+            exact: vec![],
+        },
         other => panic!("pipeline `{other}` has no backend comparison: add one here"),
     })
 }

@@ -285,6 +285,55 @@ fn a_volume_pipeline_without_a_volume_says_what_to_give() {
     assert!(count > 100, "{count} triangles");
 }
 
+/// The volume renderer without a volume, or with a transfer function it
+/// cannot read, is a usage error that names what is wrong; with a volume it
+/// renders it.
+#[test]
+fn volume_rendering_says_what_is_wrong_with_its_input() {
+    let dir = scene_dir();
+    let volume = pipeline("volume.dpp");
+    let run = |args: &[&str]| {
+        let output = Command::new(BIN)
+            .arg("run")
+            .arg(&volume)
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        (output.status.code(), all_text(&output))
+    };
+    for args in [&[][..], &["quad.obj"][..]] {
+        let (code, all) = run(args);
+        assert_eq!(code, Some(2), "{args:?}: {all}");
+        assert!(all.contains("give one volume as the scene"), "{all}");
+    }
+    std::fs::write(dir.path().join("bad.json"), r#"{"RGBPoints": [0, 0, 0]}"#).unwrap();
+    for (transfer, expected) in [
+        ("bad.json", "RGBPoints"),
+        ("missing.json", "cannot read the colour-map preset"),
+        ("viridiss", "did you mean `viridis`"),
+    ] {
+        let (code, all) = run(&["sphere:12", "--size", "16x12", "--transfer", transfer]);
+        assert_eq!(code, Some(2), "{transfer}: {all}");
+        assert!(all.contains(expected), "{transfer}: {all}");
+    }
+    // The renderer reads the volume itself: no isosurface level.
+    let (code, all) = run(&["sphere:12", "--size", "16x12", "--iso", "0"]);
+    assert_eq!(code, Some(2), "{all}");
+    assert!(all.contains("--iso is for pipelines that trace"), "{all}");
+    let (code, all) = run(&[
+        "sphere:12",
+        "--size",
+        "16x12",
+        "--transfer",
+        "grey",
+        "-o",
+        "v.png",
+    ]);
+    assert_eq!(code, Some(0), "{all}");
+    assert!(dir.path().join("v.png").is_file());
+}
+
 /// Runs `dpp args` in `dir` and waits at most `seconds` for it (then kills it
 /// and fails): an absurd resource must get a quick answer, not a long wait.
 fn dpp_within(seconds: u64, args: &[&str], dir: &Path) -> (Option<i32>, String) {

@@ -112,12 +112,38 @@ pub fn register_isosurface_functors(library: &mut FunctorLibrary) -> RecordId {
     triangle
 }
 
+/// Registers the `March` record and the volume-rendering functors
+/// (`volumeEntry`, `volumeMarch`, `marchLive`, `overBackground`, and for
+/// empty-space skipping `cellRange`, `cellBlock`, `transparent`,
+/// `marchBlock`, `skipEmpty`); they read the `Ray` record of
+/// [`register_tracer_functors`]. Returns the `March` id.
+pub fn register_volume_render_functors(library: &mut FunctorLibrary, ray: RecordId) -> RecordId {
+    use functors::*;
+    let march = volume_render::register_march_record(&mut library.records);
+    let functors: Vec<Arc<dyn dpp_runtime::Functor>> = vec![
+        Arc::new(volume_entry::VolumeEntry::new(ray, march)),
+        Arc::new(volume_march::VolumeMarch::new(march)),
+        Arc::new(march_live::MarchLive::new(march)),
+        Arc::new(over_background::OverBackground::new()),
+        Arc::new(cell_range::CellRange::new()),
+        Arc::new(cell_block::CellBlock::new()),
+        Arc::new(transparent::Transparent::new()),
+        Arc::new(march_block::MarchBlock::new(march)),
+        Arc::new(skip_empty::SkipEmpty::new(march)),
+    ];
+    for functor in functors {
+        library.register(functor);
+    }
+    march
+}
+
 /// Every functor a pipeline may name: the runtime's generic ones and the tracer's.
 pub fn functor_library() -> FunctorLibrary {
     let mut library = FunctorLibrary::default();
     dpp_runtime::generic::register_generic_functors(&mut library);
-    register_tracer_functors(&mut library);
+    let records = register_tracer_functors(&mut library);
     register_isosurface_functors(&mut library);
+    register_volume_render_functors(&mut library, records.ray);
     library
 }
 

@@ -8,8 +8,10 @@ use crate::functors::wgsl::buffers::{CameraGpuBuffers, SceneGpuBuffers, ShadingG
 use crate::mesh::{Bounds, MeshError, TriangleMesh};
 use crate::obj::{load_obj_with_materials, ObjError};
 use crate::shading::{MeshMaterials, Shading};
+use crate::volume::Volume;
 use crate::MISS_PRIM;
 use dpp_runtime::wgsl::GpuBuffer;
+use dpp_runtime::FunctorError;
 use glam::Vec3;
 use std::path::Path;
 use std::sync::Arc;
@@ -197,6 +199,9 @@ pub struct TraceResources {
     pub camera: Arc<CameraSetup>,
     /// Materials, lights, colour map: [`Shading::for_scene`] unless the user changed them.
     pub shading: Arc<Shading>,
+    /// The volume a volume-rendering pipeline marches through (the
+    /// `volume*` functors of [`crate::functors::volume_render`]), if the run has one.
+    pub volume: Option<Arc<Volume>>,
     /// GPU buffers of `camera` and `shading`, kept while those `Arc`s are the
     /// ones in the fields (set-up replaces them, e.g. through `Arc::make_mut`).
     camera_gpu_buffers: ArcKeyedCache<CameraSetup, CameraGpuBuffers>,
@@ -211,6 +216,7 @@ impl TraceResources {
             scene,
             camera,
             shading,
+            volume: None,
             camera_gpu_buffers: ArcKeyedCache::new(),
             shading_gpu_buffers: ArcKeyedCache::new(),
         }
@@ -228,9 +234,24 @@ impl TraceResources {
             .get_or_build(&self.shading, ShadingGpuBuffers::new)
     }
 
-    /// The uniforms of this scene, camera and shading (see [`crate::uniforms`]).
+    /// The uniforms of this scene, camera and shading (see [`crate::uniforms`]),
+    /// and the `volume.*` ones of its volume.
     pub fn uniforms(&self) -> dpp_runtime::Uniforms {
-        crate::uniforms(&self.scene, &self.camera, &self.shading)
+        let mut uniforms = crate::uniforms(&self.scene, &self.camera, &self.shading);
+        if let Some(volume) = &self.volume {
+            let of_volume = crate::functors::isosurface::volume_uniforms(volume);
+            uniforms.records.extend(of_volume.records);
+        }
+        uniforms
+    }
+
+    /// The run's volume, or an error saying that `functor` needs one.
+    pub fn volume(&self, functor: &str) -> Result<&Arc<Volume>, FunctorError> {
+        self.volume.as_ref().ok_or_else(|| {
+            FunctorError::bad_input(format!(
+                "{functor}: the run has no volume (give a volume as the scene)"
+            ))
+        })
     }
 }
 

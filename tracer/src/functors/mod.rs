@@ -24,6 +24,8 @@ pub mod alive;
 pub mod anti_alias;
 pub mod camera_ray;
 pub mod case_triangles;
+pub mod cell_block;
+pub mod cell_range;
 pub mod colormap;
 pub mod cube_case;
 pub mod cube_triangle;
@@ -33,15 +35,23 @@ pub mod intersect;
 pub mod intersect_embree;
 pub mod isosurface;
 pub mod light;
+pub mod march_block;
+pub mod march_live;
 pub mod material;
 pub mod normal_color;
 pub mod occ_ray_gen;
 pub mod occluded;
+pub mod over_background;
 pub mod reflect_ray;
 pub mod shader;
 pub mod shadow_ray;
+pub mod skip_empty;
 pub mod surface;
+pub mod transparent;
 pub mod visible_lights;
+pub mod volume_entry;
+pub mod volume_march;
+pub mod volume_render;
 pub mod wgsl;
 pub mod with_weight;
 
@@ -732,7 +742,8 @@ pub(crate) mod test_support {
 
         pub fn with_scene(scene: TraceScene) -> Fixture {
             let mut library = FunctorLibrary::default();
-            register_tracer_functors(&mut library);
+            let records = register_tracer_functors(&mut library);
+            crate::register_volume_render_functors(&mut library, records.ray);
             let scene = Arc::new(scene);
             let camera =
                 Camera::new(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, Vec3::Y, 90.0, 4, 3).unwrap();

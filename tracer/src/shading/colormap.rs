@@ -13,6 +13,11 @@
 //! Gradient colours are display (sRGB-encoded) values. The shader works in linear
 //! RGB and `antiAlias` encodes the final pixel to sRGB, so the table keeps both:
 //! [`ColorMap::srgb`] as the crate gives it, [`ColorMap::linear`] decoded.
+//!
+//! A colour map is also a volume's transfer function: beside the colours it
+//! keeps an opacity table on the same 256 points ([`ColorMap::opacity`]), a
+//! ramp from 0 to 1 for the named maps, or a ParaView preset's own opacity
+//! points ([`super::paraview`]).
 
 use super::{srgb_to_linear, ShadingError};
 use colorgrad::{BlendMode, Color, Gradient, GradientBuilder, LinearGradient};
@@ -39,6 +44,7 @@ pub struct ColorMap {
     name: String,
     srgb: Vec<Vec3>,
     linear: Vec<Vec3>,
+    opacity: Vec<f32>,
 }
 
 impl ColorMap {
@@ -61,6 +67,16 @@ impl ColorMap {
         } else {
             key
         };
+        let ramp = (0..COLORMAP_SIZE).map(|i| i as f32 / (COLORMAP_SIZE - 1) as f32);
+        Ok(ColorMap::sampled(
+            canonical,
+            gradient.as_ref(),
+            ramp.collect(),
+        ))
+    }
+
+    /// `gradient` sampled at the table's points, with `opacity` (one per point).
+    pub(crate) fn sampled(name: String, gradient: &dyn Gradient, opacity: Vec<f32>) -> ColorMap {
         let srgb: Vec<Vec3> = (0..COLORMAP_SIZE)
             .map(|i| {
                 let color = gradient.at(i as f32 / (COLORMAP_SIZE - 1) as f32);
@@ -68,11 +84,12 @@ impl ColorMap {
             })
             .collect();
         let linear = srgb.iter().map(|&c| srgb_to_linear(c)).collect();
-        Ok(ColorMap {
-            name: canonical,
+        ColorMap {
+            name,
             srgb,
             linear,
-        })
+            opacity,
+        }
     }
 
     pub fn name(&self) -> &str {
@@ -100,14 +117,48 @@ impl ColorMap {
     pub fn srgb_at(&self, t: f32) -> Vec3 {
         lerp_table(&self.srgb, t)
     }
+
+    /// The opacity table (in [0, 1]) on the colours' points: what a volume's
+    /// transfer function gives per unit distance (one cell).
+    pub fn opacity(&self) -> &[f32] {
+        &self.opacity
+    }
+
+    /// The linear colour and opacity at `t`, each interpolated as
+    /// [`ColorMap::linear_at`] does.
+    #[inline]
+    pub fn rgba_at(&self, t: f32) -> (Vec3, f32) {
+        let (low, frac) = table_point(t);
+        let (o0, o1) = (self.opacity[low], self.opacity[low + 1]);
+        (
+            self.linear[low].lerp(self.linear[low + 1], frac),
+            o0 + (o1 - o0) * frac,
+        )
+    }
+
+    /// Whether the opacity is 0 wherever `t` in `[lo, hi]` reads the table
+    /// (the entries around both ends included): a span of values the volume
+    /// renderer may skip.
+    pub fn transparent_between(&self, lo: f32, hi: f32) -> bool {
+        let (first, _) = table_point(lo);
+        let (last, _) = table_point(hi);
+        self.opacity[first..=last + 1].iter().all(|&a| a == 0.0)
+    }
+}
+
+/// The entry below `t` (clamped to [0, 1]; NaN reads as 0) and the fraction
+/// of the way to the next one.
+#[inline]
+fn table_point(t: f32) -> (usize, f32) {
+    let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
+    let x = t * (COLORMAP_SIZE - 1) as f32;
+    let low = (x as usize).min(COLORMAP_SIZE - 2);
+    (low, x - low as f32)
 }
 
 #[inline]
 fn lerp_table(table: &[Vec3], t: f32) -> Vec3 {
-    let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
-    let x = t * (table.len() - 1) as f32;
-    let low = (x as usize).min(table.len() - 2);
-    let frac = x - low as f32;
+    let (low, frac) = table_point(t);
     table[low].lerp(table[low + 1], frac)
 }
 

@@ -25,6 +25,7 @@
 
 mod colormap;
 mod material;
+pub mod paraview;
 mod scene_file;
 mod series;
 mod srgb;
@@ -173,6 +174,8 @@ fn parse_numbers(spec: &str) -> Result<Vec<f32>, String> {
 pub struct ShadingOverrides {
     pub lights: Option<Vec<PointLight>>,
     pub colormap: Option<String>,
+    /// A transfer function (see [`Shading::set_transfer`]), after `colormap`.
+    pub transfer: Option<String>,
     pub scalar_range: Option<[f32; 2]>,
     /// Display (sRGB) colour.
     pub background: Option<[f32; 3]>,
@@ -247,6 +250,20 @@ impl Shading {
         Ok(())
     }
 
+    /// The colour map and opacity a volume is rendered with: a named colour
+    /// map with its opacity ramp, or a ParaView preset file (`FILE.json`, its
+    /// first preset, or `FILE.json:NAME`; see [`paraview`]).
+    pub fn set_transfer(&mut self, spec: &str) -> Result<(), ShadingError> {
+        let lower = spec.to_ascii_lowercase();
+        let (path, name) = match lower.rfind(".json") {
+            Some(at) if at + 5 == spec.len() => (spec, None),
+            Some(at) if spec[at + 5..].starts_with(':') => (&spec[..at + 5], Some(&spec[at + 6..])),
+            _ => return self.set_colormap(spec),
+        };
+        self.colormap = paraview::load_preset(std::path::Path::new(path), name)?;
+        Ok(())
+    }
+
     pub fn set_scalar_range(&mut self, min: f32, max: f32) -> Result<(), ShadingError> {
         if !(min.is_finite() && max.is_finite() && min < max) {
             return Err(ShadingError::BadScalarRange(format!("[{min}, {max}]")));
@@ -315,6 +332,9 @@ impl Shading {
         if let Some(name) = &file.colormap {
             next.set_colormap(name)?;
         }
+        if let Some(spec) = &file.transfer {
+            next.set_transfer(spec)?;
+        }
         if let Some([min, max]) = file.scalar_range {
             next.set_scalar_range(min, max)?;
         }
@@ -336,6 +356,9 @@ impl Shading {
         }
         if let Some(name) = &overrides.colormap {
             next.set_colormap(name)?;
+        }
+        if let Some(spec) = &overrides.transfer {
+            next.set_transfer(spec)?;
         }
         if let Some([min, max]) = overrides.scalar_range {
             next.set_scalar_range(min, max)?;
@@ -494,6 +517,7 @@ reflectivity = 0.25
             .apply_overrides(&ShadingOverrides {
                 lights: Some(vec![light, dim]),
                 colormap: Some("inferno".into()),
+                transfer: None,
                 scalar_range: Some([5.0, 6.0]),
                 background: None,
             })

@@ -2,6 +2,8 @@
 //!
 //! ```toml
 //! colormap = "cool-to-warm"          # see COLORMAP_NAMES
+//! transfer = "preset.json"           # a volume's: a colour map name or a ParaView
+//!                                    # preset (relative to this file; FILE.json:NAME)
 //! scalar_range = [-1.0, 1.0]         # default: the mesh's scalar min and max
 //! background = [0.1, 0.1, 0.12]      # display (sRGB) colour of rays that miss
 //! lights = [                          # replaces the default key and fill lights
@@ -30,6 +32,9 @@ use std::path::Path;
 pub struct SceneFile {
     pub lights: Option<Vec<LightSpec>>,
     pub colormap: Option<String>,
+    /// See [`super::Shading::set_transfer`]; a relative preset path is
+    /// relative to the scene file's folder once [`SceneFile::load`]ed.
+    pub transfer: Option<String>,
     pub scalar_range: Option<[f32; 2]>,
     /// Display (sRGB) colour in [0, 1].
     pub background: Option<[f32; 3]>,
@@ -87,7 +92,14 @@ impl SceneFile {
             path: path.to_path_buf(),
             source,
         })?;
-        SceneFile::parse(&text, &path.display().to_string())
+        let mut file = SceneFile::parse(&text, &path.display().to_string())?;
+        if let (Some(transfer), Some(folder)) = (&mut file.transfer, path.parent()) {
+            let is_file = transfer.to_ascii_lowercase().contains(".json");
+            if is_file && Path::new(transfer.as_str()).is_relative() {
+                *transfer = folder.join(&*transfer).to_string_lossy().into_owned();
+            }
+        }
+        Ok(file)
     }
 
     /// Parses scene-file text; `origin` names it in errors.

@@ -60,18 +60,20 @@ impl VolumeResources {
 }
 
 /// The `volume.*` uniforms: `(record, field, type)`.
-pub const VOLUME_UNIFORM_FIELDS: [(&str, &str, HostType); 6] = [
+pub const VOLUME_UNIFORM_FIELDS: [(&str, &str, HostType); 7] = [
     ("volume", "cells", HostType::Int),
     ("volume", "dimsX", HostType::Int),
     ("volume", "dimsY", HostType::Int),
     ("volume", "dimsZ", HostType::Int),
     ("volume", "min", HostType::Float),
     ("volume", "max", HostType::Float),
+    ("volume", "cellSize", HostType::Float),
 ];
 
 /// The values of [`VOLUME_UNIFORM_FIELDS`] for `volume`: the number of cells,
-/// the sample counts along each axis, and the smallest and largest finite
-/// value (0 and 0 when there is none).
+/// the sample counts along each axis, the smallest and largest finite
+/// value (0 and 0 when there is none), and the cell size: the smallest
+/// distance between neighbouring samples along an axis.
 pub fn volume_uniforms(volume: &Volume) -> Uniforms {
     let mut uniforms = Uniforms::default();
     let int = |v: u64| HostValue::Int(v as i64);
@@ -86,6 +88,8 @@ pub fn volume_uniforms(volume: &Volume) -> Uniforms {
     let (min, max) = if min <= max { (min, max) } else { (0.0, 0.0) };
     uniforms.set("volume", "min", HostValue::Float(min.into()));
     uniforms.set("volume", "max", HostValue::Float(max.into()));
+    let cell = volume.spacing.abs().min_element();
+    uniforms.set("volume", "cellSize", HostValue::Float(cell.into()));
     uniforms
 }
 

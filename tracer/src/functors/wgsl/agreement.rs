@@ -110,6 +110,13 @@ const MARCHING: Within = within(
     1e-5,
     "p0 + (p1 - p0) * t with t from a / (2.5 ULP) on positions up to 6, normalised gradients",
 );
+const MARCH: Within = Within {
+    tolerance: Tolerance::Relative {
+        rel: 1e-4,
+        abs: 1e-5,
+    },
+    why: "slab divisions (2.5 ULP), trilinear sums and pow(1 - a, ratio) = exp2(ratio * log2(1 - a)) composited over a few samples",
+};
 const INTEGERS: Within = Within {
     tolerance: Tolerance::Exact,
     why: "integers, bools, and floats copied or from exact table lookups",
@@ -333,6 +340,10 @@ struct Envs {
     thin: Env,
     /// The fixture's squares as a part of a larger data set: a global id table.
     part: Env,
+    /// A distance field to volume-render: an anisotropic brick (`first` not
+    /// zero), a 24×18 camera that sees past it, a transfer function
+    /// transparent below the low end of its scalar range.
+    render: Env,
 }
 
 fn envs() -> Envs {
@@ -374,6 +385,7 @@ fn envs() -> Envs {
             v.values[77] = f32::INFINITY;
             v
         }),
+        render: render_env(),
         thin: Env::volume(
             "thin",
             Volume::from_fn(
@@ -384,6 +396,33 @@ fn envs() -> Envs {
             ),
         ),
     }
+}
+
+/// See [`Envs::render`].
+fn render_env() -> Env {
+    let mut fixture = Fixture::new();
+    let mut volume = Volume::from_fn(
+        UVec3::new(9, 8, 7),
+        Vec3::new(-1.0, -1.0, -1.0),
+        Vec3::new(0.25, 0.3, 0.35),
+        |p, _| (p - Vec3::new(0.2, 0.1, 0.6)).length(),
+    );
+    volume.first = UVec3::new(1, 0, 2);
+    fixture.resources.volume = Some(Arc::new(volume));
+    fixture.set_shading(|shading| {
+        shading.set_colormap("cool-to-warm").unwrap();
+        shading.set_scalar_range(0.3, 1.2).unwrap();
+    });
+    let camera = Camera::new(
+        Vec3::new(0.3, 0.2, 5.0),
+        Vec3::new(0.25, 0.05, 0.75),
+        Vec3::Y,
+        40.0,
+        24,
+        18,
+    )
+    .unwrap();
+    Env::trace("render", fixture, Some(camera))
 }
 
 /// See [`Envs::curved`].
@@ -1380,6 +1419,7 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
             "cell",
         ));
     }
+    volume_render_cases(&envs.render, &mut rng, &mut cases);
     let (cells, lanes) = triangle_lanes(&envs.sphere, 0.8);
     let past: Vec<u32> = lanes.view().as_u32().iter().map(|l| l + 5).collect();
     cases.push(fails(
@@ -1392,6 +1432,174 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
         "triangle",
     ));
     cases
+}
+
+/// Volume rendering: every pixel's entry (plain and jittered) and rays that
+/// miss, start inside or are dead; marches over several rounds, shaded and
+/// not; which are live; colours over the background; bad named values.
+fn volume_render_cases<'e>(env: &'e Env, rng: &mut SplitMix64, cases: &mut Vec<Case<'e>>) {
+    let pixels = env.trace_resources().camera.camera.pixels() as usize;
+    let step = float(0.1);
+    let mut rays = env.make("cameraRay", &[&iota(pixels)], &[int(1)], 1);
+    let odd = env.rays(&[
+        ray(Vec3::new(0.2, 0.1, 0.6), Vec3::X, f32::INFINITY, 0),
+        ray(Vec3::new(0.2, 0.1, 0.6), Vec3::NEG_Z, 0.3, 1),
+        ray(Vec3::new(5.0, 0.1, 0.6), Vec3::Y, f32::INFINITY, 2),
+        ray(Vec3::new(5.0, 0.1, 0.6), Vec3::NEG_X, f32::INFINITY, 3),
+        RayRecord::dead(4, 0),
+    ]);
+    for (what, input) in [("every pixel", &rays), ("odd rays", &odd)] {
+        for jitter in [false, true] {
+            cases.push(agree(
+                env,
+                "volumeEntry",
+                &format!("{what}, jitter {jitter}"),
+                &[input],
+                &[step, HostValue::Bool(jitter)],
+                1,
+                MARCH,
+            ));
+        }
+    }
+    rays = env.make("volumeEntry", &[&rays], &[step, HostValue::Bool(true)], 1);
+    for round in 0..3 {
+        for shade in [false, true] {
+            cases.push(agree(
+                env,
+                "volumeMarch",
+                &format!("round {round}, shade {shade}"),
+                &[&rays],
+                &[
+                    step,
+                    float(0.25),
+                    int(6),
+                    float(0.95),
+                    HostValue::Bool(shade),
+                ],
+                1,
+                MARCH,
+            ));
+        }
+        cases.push(agree(
+            env,
+            "marchLive",
+            &format!("round {round}"),
+            &[&rays],
+            &[],
+            1,
+            INTEGERS,
+        ));
+        let named = [
+            step,
+            float(0.25),
+            int(6),
+            float(0.95),
+            HostValue::Bool(false),
+        ];
+        rays = env.make("volumeMarch", &[&rays], &named, 1);
+    }
+    cases.push(fails(
+        env,
+        "volumeMarch",
+        "0 samples",
+        &[&rays],
+        &[step, float(0.25), int(0)],
+        1,
+        "samples",
+    ));
+    cases.push(fails(
+        env,
+        "volumeEntry",
+        "step 0",
+        &[&odd],
+        &[float(0.0)],
+        1,
+        "step",
+    ));
+    // Empty-space skipping: every cell's range and block, blocks of 1 to 3
+    // cells (the last ones cut by the border), ranges around the opacity's
+    // zero end, marches in and out of empty blocks.
+    let volume = env.trace_resources().volume.clone().unwrap();
+    let cells = iota(volume.cell_count() as usize);
+    cases.push(agree(
+        env,
+        "cellRange",
+        "every cell",
+        &[&cells],
+        &[],
+        1,
+        INTEGERS,
+    ));
+    for size in [1, 3] {
+        cases.push(agree(
+            env,
+            "cellBlock",
+            &format!("every cell, size {size}"),
+            &[&cells],
+            &[int(size)],
+            1,
+            INTEGERS,
+        ));
+        cases.push(agree(
+            env,
+            "marchBlock",
+            &format!("marches, size {size}"),
+            &[&rays],
+            &[int(size)],
+            1,
+            INTEGERS,
+        ));
+        let empty = Column::Bool((0..rays.len()).map(|i| i % 3 != 0).collect());
+        cases.push(agree(
+            env,
+            "skipEmpty",
+            &format!("marches, size {size}"),
+            &[&rays, &empty],
+            &[int(size), step],
+            1,
+            MARCH,
+        ));
+    }
+    cases.push(fails(
+        env,
+        "cellBlock",
+        "size 0",
+        &[&cells],
+        &[int(0)],
+        1,
+        "size",
+    ));
+    let ranges: Vec<glam::Vec2> = (0..400)
+        .map(|i| {
+            let lo = 0.25 + 0.1 * rng.next_f32();
+            let hi = lo
+                + if i % 4 == 0 {
+                    -0.01
+                } else {
+                    0.2 * rng.next_f32()
+                };
+            glam::Vec2::new(lo, -hi)
+        })
+        .collect();
+    cases.push(agree(
+        env,
+        "transparent",
+        "ranges about the opacity's zero end",
+        &[&Column::Vec2(ranges)],
+        &[],
+        1,
+        INTEGERS,
+    ));
+    let alphas = Column::F32((0..300).map(|_| rng.next_f32()).collect());
+    cases.push(agree(
+        env,
+        "overBackground",
+        "random colours and opacities",
+        &[&colors(rng, 300), &alphas],
+        &[],
+        1,
+        within(1e-6, "one multiply-add: a contracted fma is an ULP off"),
+    ));
 }
 
 // ---------------------------------------------------------------------------

@@ -12,7 +12,7 @@
 //! | `tracer_mesh_vertices` | `array<vec4<f32>>` | 2 per vertex: `(position, scalar)`, `(normal, 0)` |
 //! | `tracer_global_ids` | `array<u32>` | 1 with a global id table (0 without), then each triangle's id in the whole data set ([`crate::TraceScene::global_id_gpu_buffer`]) |
 //! | `tracer_shading_constants` | `array<vec4<f32>>` | `(min, max, 1 / (max - min), 0)` of the scalar range, `(background, 0)` (linear) |
-//! | `tracer_colormap` | `array<vec4<f32>>` | 256 linear colours `(r, g, b, 0)` |
+//! | `tracer_colormap` | `array<vec4<f32>>` | 256 linear colours and opacities `(r, g, b, a)` |
 //! | `tracer_materials` | `array<vec4<f32>>` | 2 per material: `(Kd, Ns)`, `(Ks, reflectivity)` |
 //! | `tracer_lights` | `array<vec4<f32>>` | 2 per light: `(position, intensity)`, `(colour, 0)` |
 //! | `tracer_camera` | `array<vec4<f32>>` | `(eye, tan(fov/2))`, `(forward, aspect)`, `(right, width)`, `(true up, height)` |
@@ -119,11 +119,9 @@ impl ShadingGpuBuffers {
         let mut constants = Vec::with_capacity(8);
         constants.extend([low, high, inverse_range, 0.0].map(f32::to_bits));
         constants.extend(vec4_words(shading.background(), 0.0));
-        let colormap = shading
-            .colormap()
-            .linear()
-            .iter()
-            .flat_map(|&color| vec4_words(color, 0.0))
+        let map = shading.colormap();
+        let colormap = (map.linear().iter().zip(map.opacity()))
+            .flat_map(|(&color, &opacity)| vec4_words(color, opacity))
             .collect();
         let materials = shading
             .materials()

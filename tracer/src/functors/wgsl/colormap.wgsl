@@ -2,7 +2,7 @@
 // tracer/src/shading/colormap.rs on the same table. Needs `tracer_vector`.
 //
 // Buffer tracer_colormap: array<vec4<f32>>, the linear-RGB lookup table (256
-// entries, (r, g, b, 0)) sampled at i / 255.
+// entries, (r, g, b, opacity)) sampled at i / 255; the opacity is for volumes.
 
 // The colour at `t` in [0, 1] (clamped; NaN reads as 0), interpolated
 // linearly between entries as glam's `lerp` does.

@@ -33,7 +33,7 @@ enum Reads {
     Nothing,
 }
 
-const TWINS: [(&str, Reads); 20] = [
+const TWINS: [(&str, Reads); 29] = [
     ("cameraRay", Reads::Scene),
     ("intersect", Reads::Scene),
     ("occluded", Reads::Scene),
@@ -54,15 +54,26 @@ const TWINS: [(&str, Reads); 20] = [
     ("cubeCase", Reads::Volume),
     ("caseTriangles", Reads::Nothing),
     ("cubeTriangle", Reads::Volume),
+    ("volumeEntry", Reads::Scene),
+    ("volumeMarch", Reads::Scene),
+    ("marchLive", Reads::Nothing),
+    ("overBackground", Reads::Scene),
+    ("cellRange", Reads::Scene),
+    ("cellBlock", Reads::Scene),
+    ("transparent", Reads::Scene),
+    ("marchBlock", Reads::Scene),
+    ("skipEmpty", Reads::Scene),
 ];
 
-/// The fixture's library with the isosurface functors too, and a small volume.
+/// The fixture's library with the isosurface functors too, and a small
+/// volume, also in the fixture's resources for the volume renderer.
 fn fixture() -> (Fixture, VolumeResources) {
     let mut fixture = Fixture::new();
     register_isosurface_functors(&mut fixture.library);
     let volume = VolumeResources {
         volume: Arc::new(generate::sphere(UVec3::new(5, 6, 7), 0.75)),
     };
+    fixture.resources.volume = Some(volume.volume.clone());
     (fixture, volume)
 }
 
@@ -309,8 +320,10 @@ fn shading_buffers_hold_what_the_shader_reads() {
     );
     let colormap = floats(&buffers.colormap.data);
     assert_eq!(colormap.len(), 4 * 256);
-    for (i, color) in shading.colormap().linear().iter().enumerate() {
+    let map = shading.colormap();
+    for (i, (color, opacity)) in map.linear().iter().zip(map.opacity()).enumerate() {
         assert_eq!(colormap[4 * i..4 * i + 3], color.to_array());
+        assert_eq!(colormap[4 * i + 3], *opacity);
     }
     let materials = floats(&buffers.materials.data);
     for (m, material) in shading.materials().iter().enumerate() {
