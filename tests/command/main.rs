@@ -11,3 +11,4 @@ mod common;
 mod distributed;
 mod images;
 mod plans;
+mod vtk;

@@ -131,7 +131,7 @@ impl Builder {
         let coordinates: Vec<f64> = points
             .cast_into()
             .ok_or_else(|| VtkError::new(path, "the points are a bit array"))?;
-        if coordinates.len() % 3 != 0 {
+        if !coordinates.len().is_multiple_of(3) {
             return Err(VtkError::new(
                 path,
                 format!(
@@ -296,9 +296,9 @@ fn flat_by_cell(mut mesh: TriangleMesh, cells: &[u32], values: &[f32]) -> Triang
     let mut copies: HashMap<(u32, u32), u32> = HashMap::new();
     let mut flat = TriangleMesh {
         normals: mesh.normals.as_ref().map(|_| Vec::new()),
-        scalars: Some(Vec::new()),
         ..TriangleMesh::default()
     };
+    let mut scalars = Vec::new();
     for (triangle, &cell) in mesh.triangles.iter().zip(cells) {
         let corners = triangle.map(|vertex| {
             *copies.entry((cell, vertex)).or_insert_with(|| {
@@ -308,12 +308,13 @@ fn flat_by_cell(mut mesh: TriangleMesh, cells: &[u32], values: &[f32]) -> Triang
                     new.push(old[vertex as usize]);
                 }
                 let value = values.get(cell as usize).copied().unwrap_or(f32::NAN);
-                flat.scalars.as_mut().map(|s| s.push(value));
+                scalars.push(value);
                 index
             })
         });
         flat.triangles.push(corners);
     }
+    flat.scalars = Some(scalars);
     flat
 }
 

@@ -383,20 +383,21 @@ fn field_values(
         ));
     }
     let tuples = values.chunks_exact(components);
-    let values: Vec<f32> =
-        match component {
-            Component::Index(index) if index >= components => return Err(VtkError::new(
+    let values: Vec<f32> = match component {
+        Component::Index(index) if index >= components => {
+            return Err(VtkError::new(
                 path,
                 format!(
                     "array `{name}` has {components} components; component {index} does not exist"
                 ),
-            )),
-            Component::Index(index) => tuples.map(|t| t[index] as f32).collect(),
-            Component::Whole if components == 1 => tuples.map(|t| t[0] as f32).collect(),
-            Component::Whole | Component::Magnitude => tuples
-                .map(|t| t.iter().map(|v| v * v).sum::<f64>().sqrt() as f32)
-                .collect(),
-        };
+            ))
+        }
+        Component::Index(index) => tuples.map(|t| t[index] as f32).collect(),
+        Component::Whole if components == 1 => tuples.map(|t| t[0] as f32).collect(),
+        Component::Whole | Component::Magnitude => tuples
+            .map(|t| t.iter().map(|v| v * v).sum::<f64>().sqrt() as f32)
+            .collect(),
+    };
     Ok(Field {
         association: array.association,
         values,
