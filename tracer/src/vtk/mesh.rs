@@ -575,6 +575,14 @@ mod tests {
         let meshes = read_mesh_pieces(&fixture("cells.pvtu"), &FieldChoice::default()).unwrap();
         let counts: Vec<usize> = meshes.iter().map(|m| m.triangles.len()).collect();
         assert_eq!(counts, pieces);
+        // What the ranks of a distributed run deal the pieces out by.
+        for (n, &count) in pieces.iter().enumerate() {
+            let piece = fixture(&format!("cells/cells_{n}.vtu"));
+            assert_eq!(
+                crate::partition::count_triangles(&piece).unwrap(),
+                count as u64
+            );
+        }
     }
 
     fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {

@@ -251,6 +251,17 @@ mod tests {
     }
 
     #[test]
+    fn a_box_of_a_vtk_volume_is_that_box_of_the_whole() {
+        let path = fixture("ball.pvti");
+        let whole = Volume::load(&path, None).unwrap();
+        assert_eq!(Volume::read_dims(&path, None).unwrap(), whole.dims);
+        let (lo, hi) = (UVec3::new(1, 2, 3), UVec3::new(5, 8, 7));
+        let part = Volume::load_box(&path, None, [lo, hi]).unwrap();
+        assert_eq!(part, whole.sub_box(lo, hi));
+        assert!(Volume::load_box(&path, None, [lo, UVec3::new(5, 8, 8)]).is_err());
+    }
+
+    #[test]
     fn raw_appended_data_is_a_clear_error() {
         let error = read_volume(&fixture("ball_raw.vti"), &FieldChoice::default())
             .unwrap_err()
