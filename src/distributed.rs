@@ -552,6 +552,11 @@ fn volume_part(
     let failed = |e: dpp_tracer::volume::VolumeError| format!("error: {e}");
     let volume = match spec {
         SceneSpec::Generated(dataset, _) => dataset.generate_brick(dims, &brick).map_err(failed),
+        // A VTK file's chosen array: read whole (VTK has no brick reads anyway).
+        SceneSpec::File(path) if request.field.is_some() => {
+            volume_setup::load_volume(path, None, request.field.as_deref())
+                .map(|whole| whole.sub_box(brick.samples[0], brick.samples[1]))
+        }
         SceneSpec::File(path) => Volume::load_brick(path, raw, &brick).map_err(failed),
         SceneSpec::Builtin(_) => Err("error: the built-in scene is not a volume".into()),
     };
