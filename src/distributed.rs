@@ -30,6 +30,7 @@ use dpp_tracer::volume::brick::{
 };
 use dpp_tracer::volume::raw::RawSpec;
 use dpp_tracer::volume::Volume;
+use dpp_tracer::vtk::VtkKind;
 use dpp_tracer::{TraceScene, TriangleMesh};
 use glam::UVec3;
 use std::sync::{Arc, Mutex};
@@ -356,13 +357,25 @@ pub fn load_part(
     } else {
         &request.scenes[..]
     };
+    // A .pvtp or .pvtu is its piece files, dealt out as pieces.
+    let expanded: Vec<SceneSpec>;
+    let scenes = match scenes {
+        [SceneSpec::File(path)] if VtkKind::of(path) == Some(VtkKind::Mesh { parallel: true }) => {
+            let files = dpp_tracer::vtk::piece_files(path).map_err(|e| format!("error: {e}"));
+            expanded = (distribution.agree(files)?.into_iter())
+                .map(SceneSpec::File)
+                .collect();
+            &expanded[..]
+        }
+        other => other,
+    };
     let (mut mesh, materials, ids, origin) = match scenes {
         [spec] if spec.is_volume(request.raw.as_deref()) => {
             let (mesh, ids) = volume_part(request, spec, library, progress, distribution)?;
             (mesh, MeshMaterials::default(), ids, spec.name())
         }
         [whole] => {
-            let loaded = whole_mesh(whole, progress);
+            let loaded = whole_mesh(whole, request.field.as_deref(), progress);
             let (mesh, materials) = distribution.agree(loaded)?;
             let ids = spatial_part(&mesh, distribution.size(), distribution.rank());
             let part = sub_mesh(&mesh, &ids);
@@ -440,6 +453,7 @@ pub fn load_part(
 /// vertex on a part's border gets the same normal as in one process).
 fn whole_mesh(
     spec: &SceneSpec,
+    field: Option<&str>,
     progress: &Progress,
 ) -> Result<(TriangleMesh, MeshMaterials), String> {
     let (mut mesh, materials) = match spec {
@@ -451,7 +465,7 @@ fn whole_mesh(
         }
         SceneSpec::File(path) => {
             progress.phase(format!("loading {}", path.display()));
-            scene_setup::load_mesh(path)?
+            scene_setup::load_mesh(path, field)?
         }
         SceneSpec::Generated(..) => return Err("error: a generated volume is not a mesh".into()),
     };
@@ -489,7 +503,7 @@ fn piece_part(
     let loaded: Result<(), String> = mine.iter().try_for_each(|&piece| {
         let path = &paths[piece];
         progress.phase(format!("loading {}", path.display()));
-        let (mesh, _) = scene_setup::load_mesh(path)?;
+        let (mesh, _) = scene_setup::load_mesh(path, request.field.as_deref())?;
         if mesh.triangles.len() as u64 != counts[piece] {
             return Err(format!(
                 "error: {}: its header counts {} triangles but it has {}",
@@ -538,6 +552,11 @@ fn volume_part(
     let failed = |e: dpp_tracer::volume::VolumeError| format!("error: {e}");
     let volume = match spec {
         SceneSpec::Generated(dataset, _) => dataset.generate_brick(dims, &brick).map_err(failed),
+        // A VTK file's chosen array: read whole (VTK has no brick reads anyway).
+        SceneSpec::File(path) if request.field.is_some() => {
+            volume_setup::load_volume(path, None, request.field.as_deref())
+                .map(|whole| whole.sub_box(brick.samples[0], brick.samples[1]))
+        }
         SceneSpec::File(path) => Volume::load_brick(path, raw, &brick).map_err(failed),
         SceneSpec::Builtin(_) => Err("error: the built-in scene is not a volume".into()),
     };

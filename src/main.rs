@@ -72,7 +72,7 @@ struct GenArgs {
 
 #[derive(clap::Args)]
 struct IsoArgs {
-    /// A NIfTI volume (.nii, .nii.gz), or a raw brick with --raw.
+    /// A NIfTI volume (.nii, .nii.gz), a VTK one (.vti, .pvti, legacy .vtk), or a raw brick with --raw.
     volume: PathBuf,
     /// The isovalue.
     #[arg(long, allow_hyphen_values = true)]
@@ -86,6 +86,9 @@ struct IsoArgs {
     /// An edited isosurface pipeline instead of the built-in pipelines/isosurface.dpp.
     #[arg(long = "iso-pipeline", value_name = "FILE.dpp")]
     iso_pipeline: Option<PathBuf>,
+    /// For a VTK volume: the point array to use (`NAME`, `NAME:mag`, `NAME:0`).
+    #[arg(long, value_name = "NAME[:mag|:N]")]
+    field: Option<String>,
     #[arg(long)]
     no_fuse: bool,
     #[arg(long)]
@@ -114,8 +117,9 @@ impl CompileArgs {
 #[derive(clap::Args)]
 struct RunArgs {
     pipeline: PathBuf,
-    /// The scene: a mesh (.obj, .ply, gzipped too), a volume (.nii, .nii.gz, a
-    /// raw brick with --raw), a generated volume (`rm:X,Y,Z`, `pbte:X,Y,Z`,
+    /// The scene: a mesh (.obj, .ply, gzipped too; VTK .vtp, .vtu, .pvtp,
+    /// .pvtu, legacy .vtk), a volume (.nii, .nii.gz, VTK .vti, .pvti, legacy
+    /// .vtk, a raw brick with --raw), a generated volume (`rm:X,Y,Z`, `pbte:X,Y,Z`,
     /// `sphere:X,Y,Z`) or `builtin[:RESOLUTION]` (the default); several mesh
     /// files are the pieces of one scene (dealt out to ranks under mpirun).
     #[arg(value_name = "SCENE")]
@@ -176,6 +180,11 @@ struct RunArgs {
     /// For a volume scene: an edited isosurface pipeline.
     #[arg(long = "iso-pipeline", value_name = "FILE.dpp")]
     iso_pipeline: Option<PathBuf>,
+    /// For a VTK scene: the array to colour by or to take the isosurface of
+    /// (`NAME`, a vector's `NAME:mag` or `NAME:N`; default: the active
+    /// scalars, else the first array).
+    #[arg(long, value_name = "NAME[:mag|:N]")]
+    field: Option<String>,
     /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
@@ -673,6 +682,7 @@ fn run_scene(
                 iso_pipeline: args.iso_pipeline.clone(),
                 fuse: !args.compile.no_fuse,
                 render_volume: !volume_reads.is_empty(),
+                field: args.field.clone(),
             },
             library,
             progress,
@@ -712,7 +722,8 @@ fn run_scene(
         }
         progress.phase(format!("loading {}", volume.display()));
         RunScene::Volume(
-            volume_setup::volume_run(volume, args.raw.as_deref()).map_err(Failure::Input)?,
+            volume_setup::volume_run(volume, args.raw.as_deref(), args.field.as_deref())
+                .map_err(Failure::Input)?,
         )
     };
     let missing: Vec<String> = reads
@@ -880,7 +891,8 @@ fn generate(args: GenArgs) -> Result<(), Failure> {
 fn iso(args: IsoArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     let pool = thread_pool(args.threads)?;
     let volume =
-        volume_setup::load_volume(&args.volume, args.raw.as_deref()).map_err(Failure::Input)?;
+        volume_setup::load_volume(&args.volume, args.raw.as_deref(), args.field.as_deref())
+            .map_err(Failure::Input)?;
     let request = volume_setup::IsoRequest {
         level: args.level,
         pipeline: args.iso_pipeline.clone(),

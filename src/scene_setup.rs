@@ -126,6 +126,8 @@ pub struct SceneRequest {
     /// The pipeline renders a volume directly (it reads `volume.*` besides
     /// the camera): the volume goes to the functors, its box is the scene.
     pub render_volume: bool,
+    /// For a VTK file: the array to use (`NAME`, `NAME:mag`, `NAME:0`).
+    pub field: Option<String>,
 }
 
 /// What a rank's share of a distributed run changes in its set-up.
@@ -288,7 +290,7 @@ pub fn load_scene(
         }
         [SceneSpec::File(path)] => {
             progress.phase(format!("loading {}", path.display()));
-            let (mesh, materials) = load_mesh(path)?;
+            let (mesh, materials) = load_mesh(path, request.field.as_deref())?;
             let scene = trace_scene(mesh, materials, progress, |e| {
                 format!("error: cannot use scene `{}`: {e}", path.display())
             })?;
@@ -299,7 +301,7 @@ pub fn load_scene(
             let mut meshes = Vec::with_capacity(paths.len());
             for path in &paths {
                 progress.phase(format!("loading {}", path.display()));
-                meshes.push(load_mesh(path)?.0);
+                meshes.push(load_mesh(path, request.field.as_deref())?.0);
             }
             let origin = format!("{} pieces", paths.len());
             let scene = trace_scene(
@@ -320,7 +322,7 @@ pub fn piece_paths(pieces: &[SceneSpec], raw: Option<&str>) -> Result<Vec<PathBu
         .map(|piece| match piece {
             SceneSpec::File(path) if !piece.is_volume(raw) => Ok(path.clone()),
             other => Err(format!(
-                "error: `{}`: a scene in several pieces is mesh files only (.obj, .ply, gzipped too); give a volume or a built-in scene alone",
+                "error: `{}`: a scene in several pieces is mesh files only (.obj, .ply, gzipped too, VTK meshes); give a volume or a built-in scene alone",
                 other.name()
             )),
         })
@@ -381,11 +383,28 @@ pub fn trace_scene(
 }
 
 /// A mesh file by its extension: `.obj` (with its MTL materials), `.ply`, or
-/// either gzip-compressed (`.obj.gz`: no materials).
-pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, MeshMaterials), String> {
+/// either gzip-compressed (`.obj.gz`: no materials), or VTK (`.vtp`, `.vtu`,
+/// a legacy `.vtk`, the pieces of a `.pvtp` or `.pvtu` joined in order),
+/// whose array `field` chooses becomes the scalars.
+pub fn load_mesh(
+    path: &Path,
+    field: Option<&str>,
+) -> Result<(TriangleMesh, MeshMaterials), String> {
     let cannot =
         |e: &dyn std::fmt::Display| format!("error: cannot use scene `{}`: {e}", path.display());
     let name = path.to_string_lossy().to_ascii_lowercase();
+    if dpp_tracer::vtk::VtkKind::of(path).is_some() {
+        let choice = volume_setup::field_choice(field)?;
+        let pieces = dpp_tracer::vtk::mesh::read_mesh_pieces(path, &choice)
+            .map_err(|e| format!("error: {e}"))?;
+        return Ok((concat_meshes(pieces), MeshMaterials::default()));
+    }
+    if let Some(field) = field {
+        return Err(format!(
+            "error: --field {field} chooses an array of a VTK file; {} has none",
+            path.display()
+        ));
+    }
     if name.ends_with(".obj") {
         dpp_tracer::obj::load_obj_with_materials(path).map_err(|e| cannot(&e))
     } else if name.ends_with(".obj.gz") {
@@ -398,7 +417,7 @@ pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, MeshMaterials), String> {
         Ok((mesh, MeshMaterials::default()))
     } else {
         Err(format!(
-            "error: cannot read scene `{}`: dpp reads .obj and .ply meshes (also gzip-compressed, .obj.gz, .ply.gz) and .nii/.nii.gz volumes (raw bricks with --raw)",
+            "error: cannot read scene `{}`: dpp reads .obj and .ply meshes (also gzip-compressed, .obj.gz, .ply.gz), VTK meshes (.vtp, .vtu, .pvtp, .pvtu, legacy .vtk), .nii/.nii.gz and VTK volumes (.vti, .pvti, legacy .vtk; raw bricks with --raw)",
             path.display()
         ))
     }
@@ -517,7 +536,7 @@ fn load_volume_spec(
         }
         SceneSpec::File(path) => {
             progress.phase(format!("loading {}", path.display()));
-            volume_setup::load_volume(path, request.raw.as_deref())
+            volume_setup::load_volume(path, request.raw.as_deref(), request.field.as_deref())
         }
         SceneSpec::Builtin(_) => Err("error: the built-in scene is not a volume".into()),
     }
@@ -543,7 +562,7 @@ pub fn volume_scene(
     mesh.scalars = None;
     if let Some(field) = &request.color_by {
         progress.phase(format!("colouring by {}", field.display()));
-        let field = volume_setup::load_volume(field, None)?;
+        let field = volume_setup::load_volume(field, None, None)?;
         volume_setup::color_by(&mut mesh, &field);
     }
     trace_scene(mesh, MeshMaterials::default(), progress, |e| {

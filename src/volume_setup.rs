@@ -10,25 +10,48 @@ use dpp_runtime::{compile_file, compile_text, CompileOptions, FunctorLibrary};
 use dpp_tracer::functors::isosurface::{triangles_to_mesh, volume_uniforms, VolumeResources};
 use dpp_tracer::volume::raw::RawSpec;
 use dpp_tracer::volume::Volume;
+use dpp_tracer::vtk::FieldChoice;
 use dpp_tracer::TriangleMesh;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 const ISOSURFACE_PIPELINE: &str = include_str!("../pipelines/isosurface.dpp");
 
-/// Whether a scene path names a volume rather than a mesh.
+/// Whether a scene path names a volume rather than a mesh (a legacy `.vtk`
+/// by its `DATASET` line).
 pub fn is_volume_path(path: &Path) -> bool {
     let name = path.to_string_lossy().to_ascii_lowercase();
-    name.ends_with(".nii") || name.ends_with(".nii.gz")
+    name.ends_with(".nii") || name.ends_with(".nii.gz") || dpp_tracer::vtk::is_volume_file(path)
 }
 
-/// A volume from a NIfTI file, or a raw brick described by `raw` (`XxYxZ:TYPE…`).
-pub fn load_volume(path: &Path, raw: Option<&str>) -> Result<Volume, String> {
+/// A VTK file's array as `--field` names it (`NAME`, `NAME:mag`, `NAME:0`);
+/// none: the file's active scalars, else its first array.
+pub fn field_choice(field: Option<&str>) -> Result<FieldChoice, String> {
+    field.map_or(Ok(FieldChoice::default()), |text| {
+        text.parse().map_err(|e| format!("error: {e}"))
+    })
+}
+
+/// A volume from a NIfTI or VTK file (`field`: which VTK array), or a raw
+/// brick described by `raw` (`XxYxZ:TYPE…`).
+pub fn load_volume(path: &Path, raw: Option<&str>, field: Option<&str>) -> Result<Volume, String> {
     let raw = raw
         .map(|spec| spec.parse::<RawSpec>())
         .transpose()
         .map_err(|e| format!("error: {e}"))?;
-    let volume = Volume::load(path, raw).map_err(|e| format!("error: {e}"))?;
+    let volume = match field {
+        Some(_) if raw.is_none() && dpp_tracer::vtk::is_volume_file(path) => {
+            dpp_tracer::vtk::volume::read_volume(path, &field_choice(field)?)
+                .map_err(|e| format!("error: {e}"))?
+        }
+        Some(field) => {
+            return Err(format!(
+                "error: --field {field} chooses an array of a VTK file; {} has one field",
+                path.display()
+            ))
+        }
+        None => Volume::load(path, raw).map_err(|e| format!("error: {e}"))?,
+    };
     volume
         .validate()
         .map_err(|e| format!("error: {}: {e}", path.display()))?;
@@ -44,9 +67,14 @@ pub struct VolumeRun {
     pub description: String,
 }
 
-/// Loads the volume at `path` (a raw brick with `raw`) for a run on the volume itself.
-pub fn volume_run(path: &Path, raw: Option<&str>) -> Result<VolumeRun, String> {
-    let volume = load_volume(path, raw)?;
+/// Loads the volume at `path` (a raw brick with `raw`, a VTK file's array
+/// `field`) for a run on the volume itself.
+pub fn volume_run(
+    path: &Path,
+    raw: Option<&str>,
+    field: Option<&str>,
+) -> Result<VolumeRun, String> {
+    let volume = load_volume(path, raw, field)?;
     let description = format!(
         "the volume {} ({}x{}x{} samples)",
         path.display(),

@@ -852,6 +852,7 @@ fn scene_request(spec: &SceneSpec, view: &str, size: (u32, u32), iso: Option<f32
         iso,
         raw: None,
         color_by: None,
+        field: None,
         iso_pipeline: None,
         fuse: true,
         render_volume: false,
@@ -886,10 +887,10 @@ fn load(spec: &SceneSpec, args: &BenchArgs, library: &FunctorLibrary) -> Result<
                     path.display()
                 )));
             };
-            let volume = volume_setup::load_volume(path, None).map_err(Failure::Input)?;
+            let volume = volume_setup::load_volume(path, None, None).map_err(Failure::Input)?;
             (iso_mesh(volume, level, library)?, MeshMaterials::default())
         }
-        SceneSpec::File(path) => scene_setup::load_mesh(path).map_err(Failure::Input)?,
+        SceneSpec::File(path) => scene_setup::load_mesh(path, None).map_err(Failure::Input)?,
     };
     let load = start.elapsed();
     let start = Instant::now();

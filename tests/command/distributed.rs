@@ -787,3 +787,13 @@ fn translucent_pieces_blend_front_to_back_in_visibility_order() {
         );
     }
 }
+
+/// VTK files: a `.pvtu`'s piece files dealt out to ranks as pieces, and a
+/// `.vti` that each rank reads whole and keeps its brick of.
+#[test]
+fn workload1_on_vtk_files_matches_one_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let fixture = |name: &str| repo().join("tests/vtk").join(name).display().to_string();
+    workload1_on_every_rank_count(dir.path(), &[&fixture("cells.pvtu")]);
+    workload1_on_every_rank_count(dir.path(), &[&fixture("ball_zlib.vti"), "--iso", "1.5"]);
+}

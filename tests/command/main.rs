@@ -12,3 +12,4 @@ mod distributed;
 mod expressions;
 mod images;
 mod plans;
+mod vtk;

@@ -195,3 +195,9 @@ pub fn mean_flip(reference: &Image, test: &Image) -> f32 {
     let error = nv_flip::flip(reference, test, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
     nv_flip::FlipPool::from_image(&error).mean()
 }
+
+/// The values of a `.npy` file.
+pub fn read_npy<T: npyz::Deserialize>(path: &Path) -> Vec<T> {
+    let bytes = std::fs::read(path).unwrap();
+    npyz::NpyFile::new(&bytes[..]).unwrap().into_vec().unwrap()
+}

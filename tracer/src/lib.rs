@@ -19,6 +19,7 @@ pub mod shading;
 mod test_meshes;
 pub mod vector;
 pub mod volume;
+pub mod vtk;
 
 pub use camera::{Camera, CameraSetup, StandardView};
 pub use functors::{TracerRecords, MISS_PRIM};

@@ -38,6 +38,9 @@ pub enum CountError {
 /// - OBJ (`.obj`, `.obj.gz`): a scan of the `f` lines, each face of `n ≥ 3`
 ///   vertices counting `n - 2` triangles (its fan); lines joined with a
 ///   trailing `\` are not followed.
+/// - VTK meshes (`.vtp`, `.vtu`, legacy `.vtk`): the mesh itself, read
+///   whole (a fan's and an external surface's triangles are not in any
+///   header), with its default field.
 pub fn count_triangles(path: &Path) -> Result<u64, CountError> {
     let io_error = |source| CountError::Io {
         path: path.to_path_buf(),
@@ -52,6 +55,11 @@ pub fn count_triangles(path: &Path) -> Result<u64, CountError> {
         .map(|n| n.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     let name = name.strip_suffix(".gz").unwrap_or(&name);
+    if crate::vtk::VtkKind::of(path).is_some() {
+        let (mesh, _) =
+            crate::vtk::mesh::read_mesh(path, &Default::default()).map_err(|e| format(e.what))?;
+        return Ok(mesh.triangles.len() as u64);
+    }
     let reader = open_maybe_gzipped(path).map_err(io_error)?;
     if name.ends_with(".ply") {
         count_ply_faces(reader).map_err(|e| match e {

@@ -685,25 +685,6 @@ pub(crate) mod tests {
         );
     }
 
-    /// The sub-box `[lo, hi)` of `whole`, with `first = lo`.
-    pub(crate) fn sub_box(whole: &Volume, lo: UVec3, hi: UVec3) -> Volume {
-        let mut values = Vec::new();
-        for k in lo.z..hi.z {
-            for j in lo.y..hi.y {
-                for i in lo.x..hi.x {
-                    values.push(whole.value(i, j, k));
-                }
-            }
-        }
-        Volume {
-            dims: hi - lo,
-            spacing: whole.spacing,
-            origin: whole.origin,
-            first: lo,
-            values,
-        }
-    }
-
     #[test]
     fn bricks_equal_the_same_sub_box_of_the_whole_volume_bit_for_bit() {
         use crate::volume::kd_bricks;
@@ -717,7 +698,7 @@ pub(crate) mod tests {
             for parts in 1..=5 {
                 for brick in kd_bricks(dims - UVec3::ONE, parts) {
                     let part = dataset.generate_brick(dims, &brick).unwrap();
-                    let expected = sub_box(&whole, brick.samples[0], brick.samples[1]);
+                    let expected = whole.sub_box(brick.samples[0], brick.samples[1]);
                     assert_eq!(part.dims, expected.dims);
                     assert_eq!(part.first, expected.first);
                     assert_eq!(part.spacing, expected.spacing);

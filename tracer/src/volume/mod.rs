@@ -2,7 +2,8 @@
 //! files or raw bricks, or generated (the paper's data sets, procedurally).
 //!
 //! - [`Volume::load`] reads a NIfTI-1 file (`.nii`, `.nii.gz`, or a `.hdr`/`.img`
-//!   pair; [`nifti`]) or, given a [`RawSpec`], a raw brick ([`raw`]).
+//!   pair; [`nifti`]), VTK image data (`.vti`, `.pvti`, legacy structured
+//!   points; [`crate::vtk::volume`]) or, given a [`RawSpec`], a raw brick ([`raw`]).
 //! - [`generate`] makes the paper's data sets procedurally (a Richtmyer–Meshkov
 //!   mixing layer, a lead-telluride crystal) and simple test fields.
 //! - [`Volume::validate`] checks what marching cubes relies on (call it on loaded
@@ -99,8 +100,10 @@ pub enum VolumeError {
     },
     #[error("{}: {what}", path.display())]
     RawSize { path: PathBuf, what: String },
+    #[error(transparent)]
+    Vtk(#[from] crate::vtk::VtkError),
     #[error(
-        "{}: unknown volume file type (expected .nii, .nii.gz or .hdr; give the dimensions and sample type to read a raw brick)",
+        "{}: unknown volume file type (expected .nii, .nii.gz, .hdr, .vti, .pvti or a legacy .vtk of structured points; give the dimensions and sample type to read a raw brick)",
         path.display()
     )]
     UnknownFileType { path: PathBuf },
@@ -178,6 +181,10 @@ impl Volume {
         if let Some(spec) = raw {
             return raw::read_raw(path, &spec);
         }
+        if crate::vtk::is_volume_file(path) {
+            let default = crate::vtk::FieldChoice::default();
+            return Ok(crate::vtk::volume::read_volume(path, &default)?);
+        }
         check_nifti_name(path)?;
         nifti::read_nifti(path)
     }
@@ -189,6 +196,8 @@ impl Volume {
         let path = path.as_ref();
         match raw {
             Some(spec) => raw::raw_dims(path, &spec),
+            // VTK has no header to read alone: the whole file is read.
+            None if crate::vtk::is_volume_file(path) => Ok(Volume::load(path, None)?.dims),
             None => {
                 check_nifti_name(path)?;
                 nifti::nifti_dims(path)
@@ -220,10 +229,35 @@ impl Volume {
         let path = path.as_ref();
         match raw {
             Some(spec) => raw::read_raw_box(path, &spec, samples),
+            None if crate::vtk::is_volume_file(path) => {
+                let whole = Volume::load(path, None)?;
+                raw::check_box(path, whole.dims, samples)?;
+                Ok(whole.sub_box(samples[0], samples[1]))
+            }
             None => {
                 check_nifti_name(path)?;
                 nifti::read_nifti_box(path, samples)
             }
+        }
+    }
+
+    /// The samples `[lo, hi)` (indices in this volume, inside it), with
+    /// `first = lo`.
+    pub fn sub_box(&self, lo: UVec3, hi: UVec3) -> Volume {
+        let mut values = Vec::new();
+        for k in lo.z..hi.z {
+            for j in lo.y..hi.y {
+                for i in lo.x..hi.x {
+                    values.push(self.value(i, j, k));
+                }
+            }
+        }
+        Volume {
+            dims: hi - lo,
+            spacing: self.spacing,
+            origin: self.origin,
+            first: lo,
+            values,
         }
     }
 

@@ -1156,7 +1156,7 @@ mod tests {
 
     #[test]
     fn a_box_read_is_the_same_sub_box_of_the_whole_read() {
-        use crate::volume::generate::{tests::sub_box, Dataset};
+        use crate::volume::generate::Dataset;
         use crate::volume::kd_bricks;
         let dir = tempfile::tempdir().unwrap();
         let dims = UVec3::new(9, 7, 6);
@@ -1170,7 +1170,7 @@ mod tests {
             for parts in 1..=5 {
                 for brick in kd_bricks(dims - UVec3::ONE, parts) {
                     let part = Volume::load_brick(&path, None, &brick).unwrap();
-                    let expected = sub_box(&read, brick.samples[0], brick.samples[1]);
+                    let expected = read.sub_box(brick.samples[0], brick.samples[1]);
                     assert_eq!(part, expected, "{name} {brick:?}");
                 }
             }

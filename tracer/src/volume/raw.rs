@@ -459,7 +459,6 @@ mod tests {
 
     #[test]
     fn a_box_read_is_the_same_sub_box_of_the_whole_read() {
-        use crate::volume::generate::tests::sub_box;
         use crate::volume::kd_bricks;
         let dir = tempfile::tempdir().unwrap();
         let dims = UVec3::new(7, 5, 6);
@@ -476,7 +475,7 @@ mod tests {
         for parts in 1..=6 {
             for brick in kd_bricks(dims - UVec3::ONE, parts) {
                 let part = Volume::load_brick(&path, Some(spec), &brick).unwrap();
-                assert_eq!(part, sub_box(&whole, brick.samples[0], brick.samples[1]));
+                assert_eq!(part, whole.sub_box(brick.samples[0], brick.samples[1]));
             }
         }
         // Runs merge where the box spans whole rows and slices.
