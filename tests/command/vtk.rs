@@ -104,11 +104,27 @@ fn a_parallel_grid_renders_its_pieces_external_faces() {
         "pieces",
     );
     assert_eq!(whole, pieces);
-    // 48 + 60 triangles: the pieces' external surfaces as VTK counts them
-    // (tests/vtk/expected.json).
+    // The pieces' external surfaces, as VTK counts them (expected.json).
+    let expected: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fixture("expected.json")).unwrap()).unwrap();
+    let triangles: u64 = (expected["cells"]["piece_surface_triangles"]
+        .as_array()
+        .unwrap())
+    .iter()
+    .map(|n| n.as_u64().unwrap())
+    .sum();
     let hit: Vec<u32> = whole.iter().copied().filter(|&p| p != u32::MAX).collect();
     assert!(hit.len() > whole.len() / 10);
-    assert!(hit.iter().all(|&p| p < 108), "{:?}", hit.iter().max());
+    assert!(
+        hit.iter().all(|&p| (p as u64) < triangles),
+        "{:?}",
+        hit.iter().max()
+    );
+    // Every piece shows (its ids follow the first piece's).
+    let first: u64 = expected["cells"]["piece_surface_triangles"][0]
+        .as_u64()
+        .unwrap();
+    assert!(hit.iter().any(|&p| (p as u64) < first) && hit.iter().any(|&p| (p as u64) >= first));
     // Coloured by the cell field by default (the active scalars), by a
     // point field when asked.
     let (w2, cells) = (pipeline("workload2.dpp"), fixture("cells.pvtu"));

@@ -241,6 +241,11 @@ impl FromStr for FieldChoice {
     }
 }
 
+/// vtkio leaves out an XML array whose length does not match its points or
+/// cells without a word, so a missing array may be a broken one.
+pub(crate) const XML_DROPS: &str =
+    " (an XML array whose length does not match the points or cells is left out)";
+
 /// Where a field's values live.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Association {
@@ -331,7 +336,7 @@ impl FieldChoice {
                 VtkError::new(
                     path,
                     format!(
-                        "no array named `{name}`; its arrays: {}",
+                        "no array named `{name}`; its arrays: {}{XML_DROPS}",
                         if names.is_empty() {
                             "none".to_string()
                         } else {

@@ -126,7 +126,10 @@ fn place_piece(
         .map(|r| len(r).saturating_sub(1).max(1))
         .product();
     let Some((field, concrete)) = choice.pick(file, &piece.data, points, cells)? else {
-        return Err(VtkError::new(file, "the volume has no point data arrays"));
+        return Err(VtkError::new(
+            file,
+            format!("the volume has no point data arrays{}", super::XML_DROPS),
+        ));
     };
     if field.association == Association::Cell {
         return Err(VtkError::new(
