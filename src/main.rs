@@ -682,6 +682,9 @@ fn run_scene(
                 iso_pipeline: args.iso_pipeline.clone(),
                 fuse: !args.compile.no_fuse,
                 render_volume: !volume_reads.is_empty(),
+                traces_surface: plan.stages().iter().any(|stage| {
+                    (stage.ops.iter()).any(|op| op.functor.as_deref() == Some("intersect"))
+                }),
                 field: args.field.clone(),
             },
             library,

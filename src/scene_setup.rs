@@ -126,6 +126,9 @@ pub struct SceneRequest {
     /// The pipeline renders a volume directly (it reads `volume.*` besides
     /// the camera): the volume goes to the functors, its box is the scene.
     pub render_volume: bool,
+    /// The pipeline intersects a surface (`map<intersect>`): a volume it
+    /// renders has its isosurface (`--iso`) inside (pipelines/volume_surface.dpp).
+    pub traces_surface: bool,
     /// For a VTK file: the array to use (`NAME`, `NAME:mag`, `NAME:0`).
     pub field: Option<String>,
 }
@@ -158,7 +161,7 @@ impl SceneSetup {
         distribution: &Distribution,
     ) -> Result<SceneSetup, String> {
         if request.render_volume {
-            return distribution.agree(volume_rendering(request, progress, distribution));
+            return distribution.agree(volume_rendering(request, library, progress, distribution));
         }
         let (scene, origin, share) = load_share(request, library, progress, distribution)?;
         distribution.agree(SceneSetup::with_scene(
@@ -428,6 +431,7 @@ pub fn load_mesh(
 /// scene.
 fn volume_rendering(
     request: &SceneRequest,
+    library: &FunctorLibrary,
     progress: &Progress,
     distribution: &Distribution,
 ) -> Result<SceneSetup, String> {
@@ -448,20 +452,32 @@ fn volume_rendering(
         request.color_by.is_some(),
         request.iso_pipeline.is_some(),
     ];
-    if let Some(option) = isosurface_option(given) {
-        return Err(format!(
-            "error: {option} is for pipelines that trace a volume's isosurface; a volume-rendering pipeline renders the volume itself (its params: --set NAME=VALUE)"
-        ));
+    match (isosurface_option(given), request.traces_surface) {
+        (Some(option), false) => {
+            return Err(format!(
+                "error: {option} is for pipelines that trace a volume's isosurface; a volume-rendering pipeline renders the volume itself (its params: --set NAME=VALUE)"
+            ))
+        }
+        (None, true) if request.iso.is_none() => {
+            return Err("error: this pipeline renders a volume with its isosurface inside: give the surface's level with --iso LEVEL".into())
+        }
+        _ => {}
     }
     let volume = load_volume_spec(request, spec, progress)?;
     let range = dpp_tracer::shading::default_scalar_range(&volume.values);
     let origin = spec.name();
-    let scene = trace_scene(
-        box_mesh(&volume.bounds()),
-        MeshMaterials::default(),
-        progress,
-        |e| format!("error: the box of `{origin}`: {e}"),
-    )?;
+    let scene = if request.traces_surface {
+        // The surface takes the transfer function's colour at its level,
+        // unless --color-by gives another field.
+        isosurface_scene(request, spec, volume.clone(), library, progress, true)?
+    } else {
+        trace_scene(
+            box_mesh(&volume.bounds()),
+            MeshMaterials::default(),
+            progress,
+            |e| format!("error: the box of `{origin}`: {e}"),
+        )?
+    };
     let share = RankShare {
         scalar_range: Some(range),
         traced_tiles: None,
@@ -550,6 +566,20 @@ pub fn volume_scene(
     progress: &Progress,
 ) -> Result<TraceScene, String> {
     let volume = load_volume_spec(request, spec, progress)?;
+    isosurface_scene(request, spec, volume, library, progress, false)
+}
+
+/// The isosurface of `volume` at the run's level as the traced scene,
+/// coloured by `--color-by`'s field, else by height, or, `at_level`, by the
+/// level itself (every vertex's scalar).
+fn isosurface_scene(
+    request: &SceneRequest,
+    spec: &SceneSpec,
+    volume: dpp_tracer::volume::Volume,
+    library: &FunctorLibrary,
+    progress: &Progress,
+    at_level: bool,
+) -> Result<TraceScene, String> {
     let level = iso_level(request, spec, volume.value_range())?;
     let iso = IsoRequest {
         level,
@@ -559,7 +589,7 @@ pub fn volume_scene(
     progress.phase(format!("isosurface at level {level}"));
     let mut mesh = volume_setup::isosurface(volume, &iso, library)?;
     // The surface's own values all equal the level: colour by height, or by a second field.
-    mesh.scalars = None;
+    mesh.scalars = at_level.then(|| vec![level; mesh.positions.len()]);
     if let Some(field) = &request.color_by {
         progress.phase(format!("colouring by {}", field.display()));
         let field = volume_setup::load_volume(field, None, None)?;

@@ -856,6 +856,7 @@ fn scene_request(spec: &SceneSpec, view: &str, size: (u32, u32), iso: Option<f32
         iso_pipeline: None,
         fuse: true,
         render_volume: false,
+        traces_surface: false,
     }
 }
 

@@ -121,6 +121,24 @@ fn comparison(name: &str) -> Option<Comparison> {
             prim: false,
             exact: vec![],
         },
+        // The same, with the volume's isosurface inside it.
+        "volume_surface" => Comparison {
+            args: [
+                "sphere:24",
+                "--iso",
+                "0.3",
+                "--size",
+                "64x48",
+                "--set",
+                "shade=true",
+            ]
+            .iter()
+            .map(|s| s.to_string())
+            .collect(),
+            image: true,
+            prim: false,
+            exact: vec![],
+        },
         other => panic!("pipeline `{other}` has no backend comparison: add one here"),
     })
 }

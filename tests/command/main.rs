@@ -12,4 +12,5 @@ mod distributed;
 mod expressions;
 mod images;
 mod plans;
+mod volume_surface;
 mod vtk;

@@ -82,6 +82,7 @@ pub fn register_tracer_functors(library: &mut FunctorLibrary) -> TracerRecords {
         Arc::new(light::LightFunctor::new(light)),
         Arc::new(colormap::Colormap::new()),
         Arc::new(with_weight::WithWeight::new(ray)),
+        Arc::new(clip_ray::ClipRay::new(ray)),
     ];
     for functor in functors {
         library.register(functor);
@@ -253,6 +254,7 @@ mod tests {
                 "alive",
                 "antiAlias",
                 "cameraRay",
+                "clipRay",
                 "colormap",
                 "globalId",
                 "intersect",
@@ -330,6 +332,7 @@ mod tests {
             "map          light(index: u32) -> (l: Light)",
             "map          colormap(scalar: f32) -> (rgb: vec3)",
             "map          withWeight(ray: Ray, weight: vec3) -> (ray: Ray)",
+            "map          clipRay(ray: Ray, t: f32) -> (ray: Ray)",
         ];
         for line in expected {
             let name = line.split_whitespace().nth(1).unwrap();

@@ -26,6 +26,7 @@ pub mod camera_ray;
 pub mod case_triangles;
 pub mod cell_block;
 pub mod cell_range;
+pub mod clip_ray;
 pub mod colormap;
 pub mod cube_case;
 pub mod cube_triangle;

@@ -1070,6 +1070,24 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
         1,
         INTEGERS,
     ));
+    let ends = Column::F32(
+        (0..bounce.len())
+            .map(|i| match i % 4 {
+                0 => f32::INFINITY,
+                1 => f32::NAN,
+                _ => rng.next_f32() * 4.0,
+            })
+            .collect(),
+    );
+    cases.push(agree(
+        curved,
+        "clipRay",
+        "reflection rays, live and dead",
+        &[&bounce, &ends],
+        &[],
+        1,
+        INTEGERS,
+    ));
     cases.push(agree(
         curved,
         "alive",

@@ -33,7 +33,7 @@ enum Reads {
     Nothing,
 }
 
-const TWINS: [(&str, Reads); 29] = [
+const TWINS: [(&str, Reads); 30] = [
     ("cameraRay", Reads::Scene),
     ("intersect", Reads::Scene),
     ("occluded", Reads::Scene),
@@ -51,6 +51,7 @@ const TWINS: [(&str, Reads); 29] = [
     ("light", Reads::Scene),
     ("colormap", Reads::Scene),
     ("withWeight", Reads::Nothing),
+    ("clipRay", Reads::Nothing),
     ("cubeCase", Reads::Volume),
     ("caseTriangles", Reads::Nothing),
     ("cubeTriangle", Reads::Volume),
