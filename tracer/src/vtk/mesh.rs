@@ -490,7 +490,7 @@ fn cell_list(path: &Path, numbers: &VertexNumbers, points: usize) -> Result<Cell
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vtk::fixture;
+    use crate::vtk::{fixture, read_mutated_fixtures};
 
     fn read(name: &str, field: &str) -> Result<TriangleMesh, VtkError> {
         let choice = match field {
@@ -638,27 +638,15 @@ mod tests {
 
     #[test]
     fn mutated_files_never_panic() {
-        let mut random = dpp_runtime::random::SplitMix64::new(5);
-        let dir = tempfile::tempdir().unwrap();
-        for name in [
+        let names = [
             "shape.vtp",
             "shape_legacy_binary.vtk",
             "shape_legacy42.vtk",
             "cells.vtu",
             "cells_legacy.vtk",
-        ] {
-            let good = std::fs::read(fixture(name)).unwrap();
-            for round in 0..80 {
-                let mut bytes = good.clone();
-                for _ in 0..1 + round % 8 {
-                    let at = (random.next_u64() % bytes.len() as u64) as usize;
-                    bytes[at] = random.next_u64() as u8;
-                }
-                let len = bytes.len() - (random.next_u64() % 16) as usize;
-                let path = dir.path().join(name);
-                std::fs::write(&path, &bytes[..len]).unwrap();
-                let _ = read_mesh(&path, &FieldChoice::default());
-            }
-        }
+        ];
+        read_mutated_fixtures(&names, 5, 80, |path| {
+            let _ = read_mesh(path, &FieldChoice::default());
+        });
     }
 }

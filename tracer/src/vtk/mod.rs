@@ -418,6 +418,34 @@ pub(crate) fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// Reads copies of the fixtures `names`, each with up to 8 bytes replaced at
+/// random and its end cut by up to 15 bytes, `rounds` times per fixture:
+/// the readers' fuzz test, which only asks that `read` returns.
+#[cfg(test)]
+pub(crate) fn read_mutated_fixtures(
+    names: &[&str],
+    seed: u64,
+    rounds: usize,
+    read: impl Fn(&std::path::Path),
+) {
+    let mut random = dpp_runtime::random::SplitMix64::new(seed);
+    let dir = tempfile::tempdir().unwrap();
+    for name in names {
+        let good = std::fs::read(fixture(name)).unwrap();
+        for round in 0..rounds {
+            let mut bytes = good.clone();
+            for _ in 0..1 + round % 8 {
+                let at = (random.next_u64() % bytes.len() as u64) as usize;
+                bytes[at] = random.next_u64() as u8;
+            }
+            let len = bytes.len() - (random.next_u64() % 16) as usize;
+            let path = dir.path().join(name);
+            std::fs::write(&path, &bytes[..len]).unwrap();
+            read(&path);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -175,7 +175,7 @@ fn ranges(path: &Path, extent: Extent) -> Result<[RangeInclusive<i32>; 3], VtkEr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vtk::fixture;
+    use crate::vtk::{fixture, read_mutated_fixtures};
 
     /// The fixture volume as `scripts/make-vtk-fixtures.py` defines it.
     fn expected() -> Volume {
@@ -295,27 +295,15 @@ mod tests {
 
     #[test]
     fn mutated_files_never_panic() {
-        let mut random = dpp_runtime::random::SplitMix64::new(11);
-        let dir = tempfile::tempdir().unwrap();
-        for name in [
+        let names = [
             "ball_ascii.vti",
             "ball_appended.vti",
             "ball_zlib.vti",
             "ball_lz4.vti",
             "ball_legacy_binary.vtk",
-        ] {
-            let good = std::fs::read(fixture(name)).unwrap();
-            for round in 0..60 {
-                let mut bytes = good.clone();
-                for _ in 0..1 + round % 8 {
-                    let at = (random.next_u64() % bytes.len() as u64) as usize;
-                    bytes[at] = random.next_u64() as u8;
-                }
-                let len = bytes.len() - (random.next_u64() % 16) as usize;
-                let path = dir.path().join(name);
-                std::fs::write(&path, &bytes[..len]).unwrap();
-                let _ = read_volume(&path, &FieldChoice::default());
-            }
-        }
+        ];
+        read_mutated_fixtures(&names, 11, 60, |path| {
+            let _ = read_volume(path, &FieldChoice::default());
+        });
     }
 }
