@@ -11,68 +11,6 @@ use dpp_runtime::{
     RecordType, Signature, TypeConstraint, TypePattern,
 };
 
-/// Every generic functor; the library must hold exactly these.
-const GENERIC: &[&str] = &[
-    "add",
-    "mul",
-    "min",
-    "max",
-    "or",
-    "and",
-    "sub",
-    "div",
-    "eq",
-    "ne",
-    "lt",
-    "le",
-    "gt",
-    "ge",
-    "not",
-    "isZero",
-    "nonZero",
-    "toU32",
-    "toI32",
-    "toF32",
-    "select",
-    "identity",
-    "hash",
-    "random",
-    "sum",
-    "average",
-    "repeat",
-    "lane",
-    "neg",
-    "abs",
-    "floor",
-    "ceil",
-    "fract",
-    "sqrt",
-    "rsqrt",
-    "exp",
-    "log",
-    "sin",
-    "cos",
-    "pow",
-    "clamp",
-    "mix",
-    "step",
-    "smoothstep",
-    "dot",
-    "cross",
-    "length",
-    "distance",
-    "normalize",
-    "reflect",
-    "vec2",
-    "vec3",
-    "vec4",
-    "splat2",
-    "splat3",
-    "splat4",
-    "component",
-    "rem",
-];
-
 /// The generic functors and the record type `Pair { count: u32, position: vec3, hit: bool }`.
 fn library() -> (FunctorLibrary, RecordId) {
     let mut library = FunctorLibrary::default();
@@ -159,22 +97,16 @@ fn check(
 }
 
 #[test]
-fn the_table_lists_every_generic_functor() {
-    let (library, _) = library();
-    let mut names: Vec<&str> = library.names().collect();
-    let mut expected = GENERIC.to_vec();
-    names.sort_unstable();
-    expected.sort_unstable();
-    assert_eq!(names, expected);
-}
-
-#[test]
 fn every_twin_compiles_for_every_admitted_type() {
     let (library, pair) = library();
     let mut candidates = ElemType::PRIMITIVES.to_vec();
     candidates.push(ElemType::Record(pair));
     let mut failures = Vec::new();
-    for &name in GENERIC {
+    // Which functors the library holds is pinned by the runtime's own test
+    // (runtime/tests/runtime/generic_functors.rs); here every one compiles.
+    let mut checked = 0;
+    for name in library.names() {
+        checked += 1;
         let signature = library.get(name).expect("a generic functor").signature();
         let cases = instantiations(signature, &candidates);
         assert!(!cases.is_empty(), "`{name}` admits no type");
@@ -184,6 +116,7 @@ fn every_twin_compiles_for_every_admitted_type() {
             }
         }
     }
+    assert!(checked > 50, "only {checked} generic functors were checked");
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
 }
 
