@@ -25,6 +25,8 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use wgpu::util::DeviceExt;
 
+mod radix_sort;
+
 pub struct GpuRunContext<'a> {
     pub gpu: &'a GpuContext,
     pub library: &'a FunctorLibrary,
@@ -626,6 +628,15 @@ impl Backend for GpuBackend<'_> {
                     let out =
                         self.scan(*op, !exclusive, values, flags.as_ref(), &mut dispatches)?;
                     slots.set_array(*output, out);
+                }
+                SinkWork::Sort { keys, values } => {
+                    let values_array = values.as_ref().map(|(array, _)| array);
+                    let (sorted_keys, sorted_values) =
+                        self.sort(keys, values_array, &mut dispatches)?;
+                    slots.set_array(*output, sorted_keys);
+                    if let (Some((_, var)), Some(sorted)) = (values, sorted_values) {
+                        slots.set_array(*var, sorted);
+                    }
                 }
             }
         }

@@ -1,7 +1,7 @@
 //! One stage as one compute shader: each op of the stage becomes WGSL
 //! statements in plan order, values live in locals, whole arrays are read
 //! through generated accessors, and what the stage materialises is stored at
-//! the end. Each sink (scatter, reduce, scan; a stage may end in several
+//! the end. Each sink (scatter, reduce, scan, sort; a stage may end in several
 //! scatters) either completes in the kernel (combining scatter, through
 //! atomics) or leaves its inputs in arrays for the sink kernels that follow
 //! (see `exec.rs`).
@@ -47,6 +47,12 @@ pub enum SinkWork {
         exclusive: bool,
         values: GpuArray,
         flags: Option<GpuArray>,
+    },
+    /// `sort` and `sortByKey`: the keys, and the values with the variable
+    /// that gets them sorted.
+    Sort {
+        keys: GpuArray,
+        values: Option<(GpuArray, VarId)>,
     },
 }
 
@@ -385,6 +391,14 @@ impl Generator<'_, '_, '_> {
                             flags,
                         },
                     ));
+                }
+                OpKind::Sort { .. } => {
+                    let keys = self.keep(op.inputs[0], slots)?;
+                    let values = match op.inputs.get(1) {
+                        Some(&v) => Some((self.keep(v, slots)?, op.outputs[1])),
+                        None => None,
+                    };
+                    sinks.push((op.outputs[0], SinkWork::Sort { keys, values }));
                 }
                 OpKind::Elementwise { .. } => {
                     return Err(RunError::internal(format!(

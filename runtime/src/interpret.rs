@@ -823,7 +823,7 @@ pub fn elementwise_materialised(stage: &Stage) -> Vec<VarId> {
         .ops
         .iter()
         .filter(|op| op.is_sink())
-        .map(|op| op.outputs[0])
+        .flat_map(|op| op.outputs.iter().copied())
         .collect();
     stage
         .materialises

@@ -101,6 +101,15 @@ fn comparison(name: &str) -> Option<Comparison> {
             prim: false,
             exact: vec!["inclusive", "exclusive", "segmented"],
         },
+        "examples.sort" => Comparison {
+            args: ["sorted", "order", "restored"]
+                .iter()
+                .flat_map(|name| ["--out".to_string(), format!("{name}={name}.npy")])
+                .collect(),
+            image: false,
+            prim: false,
+            exact: vec!["sorted", "order", "restored"],
+        },
         // Needs a volume: compared in tracer/tests/pipelines/isosurface.rs.
         "isosurface" => return None,
         // A generated volume, shaded and jittered: every volume functor.

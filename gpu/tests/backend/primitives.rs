@@ -19,9 +19,20 @@ fn library() -> FunctorLibrary {
         ("u32Data", ElemType::U32),
         ("f32Data", ElemType::F32),
         ("boolData", ElemType::Bool),
+        ("i32Data", ElemType::I32),
     ] {
         crate::data::register_data_functor(&mut library, name, ty);
     }
+    // Values of `sortByKey` that are records: every field moves with its key.
+    let pair = library.records.register(RecordType {
+        name: "Pair".into(),
+        fields: vec![
+            ("id".into(), ElemType::U32),
+            ("weight".into(), ElemType::F32),
+        ],
+        doc: "a test record".into(),
+    });
+    crate::data::register_data_functor(&mut library, "pairData", ElemType::Record(pair));
     library
 }
 
@@ -71,6 +82,20 @@ pipeline primitives {
     out segmentedInclusive = scan<add>(a, segments: flags)
     out segmentedExclusive = exclusiveScan<max>(a, segments: flags)
     out fscan       = scan<add>(f)
+    fk      = iota(n) → map<f32Data>(column: 10)
+    ik      = iota(n) → map<i32Data>(column: 11)
+    pairs   = iota(n) → map<pairData>(column: 12)
+    out sortedA     = sort(a)
+    out sortedSums  = sort(map<add>(a, b))
+    (sortedIdx, idxOrder) = sortByKey(idx, iota(n))
+    out sortedIdx
+    out idxOrder
+    (sortedFk, fkPairs) = sortByKey(fk, pairs)
+    out sortedFk
+    out fkPairs
+    (sortedIk, ikValues) = sortByKey(ik, f)
+    out sortedIk
+    out ikValues
 }
 "#;
 
@@ -89,6 +114,11 @@ struct Case {
     flags: Vec<bool>,
     grouped: Vec<u32>,
     src: Vec<u32>,
+    /// Sort keys with many duplicates, signed zeros and infinities.
+    fk: Vec<f32>,
+    ik: Vec<i32>,
+    /// `Pair` records as (id, weight).
+    pairs: (Vec<u32>, Vec<f32>),
 }
 
 /// Sizes 0, 1, primes, and above both the test chunk (64) and the default (4096).
@@ -116,9 +146,27 @@ fn case_of_size(n: impl Strategy<Value = usize>) -> impl Strategy<Value = Case> 
             proptest::collection::vec(prop::bool::weighted(0.1), n),
             proptest::collection::vec(0u32..1000, n * k),
             proptest::collection::vec(any::<u32>(), m),
+            (
+                proptest::collection::vec(proptest::sample::select(FLOAT_KEYS), n),
+                proptest::collection::vec(-3i32..3, n),
+                proptest::collection::vec(any::<u32>(), n),
+                proptest::collection::vec(-1000.0f32..1000.0, n),
+            ),
         )
             .prop_map(
-                move |(a, b, idx, perm, keep, dst, f, flags, grouped, src)| Case {
+                move |(
+                    a,
+                    b,
+                    idx,
+                    perm,
+                    keep,
+                    dst,
+                    f,
+                    flags,
+                    grouped,
+                    src,
+                    (fk, ik, ids, weights),
+                )| Case {
                     n,
                     m,
                     k,
@@ -132,10 +180,27 @@ fn case_of_size(n: impl Strategy<Value = usize>) -> impl Strategy<Value = Case> 
                     flags,
                     grouped,
                     src,
+                    fk,
+                    ik,
+                    pairs: (ids, weights),
                 },
             )
     })
 }
+
+/// Float keys that test the sort's order: duplicates, both zeros, both
+/// infinities, a subnormal (NaNs: `floats_sort_in_total_order_on_both_backends`).
+const FLOAT_KEYS: &[f32] = &[
+    -2.5,
+    -1.0,
+    -0.0,
+    0.0,
+    1.0e-45,
+    0.5,
+    1.0,
+    f32::INFINITY,
+    f32::NEG_INFINITY,
+];
 
 /// The same case of `n` elements on every run (proptest's deterministic runner).
 fn fixed_case(n: usize) -> Case {
@@ -173,7 +238,21 @@ fn data_of(case: &Case) -> crate::data::Data {
         Column::Bool(case.flags.clone()),
         Column::U32(case.grouped.clone()),
         Column::U32(case.src.clone()),
+        Column::F32(case.fk.clone()),
+        Column::I32(case.ik.clone()),
+        pair_column(&case.pairs.0, &case.pairs.1),
     ])
+}
+
+fn pair_column(ids: &[u32], weights: &[f32]) -> Column {
+    let pair = library().records.find("Pair").unwrap();
+    Column::Record {
+        ty: pair,
+        fields: vec![
+            Arc::new(Column::U32(ids.to_vec())),
+            Arc::new(Column::F32(weights.to_vec())),
+        ],
+    }
 }
 
 fn run(case: &Case, fuse: bool, threads: usize, chunk: usize) -> HashMap<String, OutputValue> {
@@ -196,12 +275,22 @@ fn run_result_with_pool(
 ) -> RunResult {
     let library = library();
     let plan = compile_case(case, &library, fuse);
-    let data = data_of(case);
+    run_plan_on_cpu(&plan, &library, &data_of(case), threads, chunk, column_pool)
+}
+
+fn run_plan_on_cpu(
+    plan: &Plan,
+    library: &FunctorLibrary,
+    data: &crate::data::Data,
+    threads: usize,
+    chunk: usize,
+    column_pool: &ColumnPool,
+) -> RunResult {
     let uniforms = Uniforms::default();
     let context = RunContext {
-        library: &library,
+        library,
         uniforms: &uniforms,
-        resources: &data,
+        resources: data,
         chunk,
         column_pool,
     };
@@ -209,7 +298,7 @@ fn run_result_with_pool(
         .num_threads(threads)
         .build()
         .unwrap();
-    pool.install(|| run_plan(&plan, &context)).unwrap()
+    pool.install(|| run_plan(plan, &context)).unwrap()
 }
 
 fn run_gpu(case: &Case, fuse: bool, gpu: &GpuContext) -> HashMap<String, OutputValue> {
@@ -222,16 +311,116 @@ fn run_gpu(case: &Case, fuse: bool, gpu: &GpuContext) -> HashMap<String, OutputV
 fn run_gpu_result(case: &Case, fuse: bool, gpu: &GpuContext) -> RunResult {
     let library = library();
     let plan = compile_case(case, &library, fuse);
-    let data = data_of(case);
+    run_plan_on_gpu(&plan, &library, &data_of(case), gpu)
+}
+
+fn run_plan_on_gpu(
+    plan: &Plan,
+    library: &FunctorLibrary,
+    data: &crate::data::Data,
+    gpu: &GpuContext,
+) -> RunResult {
     let uniforms = Uniforms::default();
     let context = GpuRunContext {
         gpu,
-        library: &library,
+        library,
         uniforms: &uniforms,
-        resources: &data,
+        resources: data,
         profile: false,
     };
-    run_plan_gpu(&plan, &context).unwrap_or_else(|e| panic!("{e}"))
+    run_plan_gpu(plan, &context).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Float keys in the total order of docs/language.md §3, sort, NaNs of both
+/// signs and several payloads included, each many times (stability): every
+/// way of running gives the reference's bits and permutation: the CPU on 1
+/// and 2 threads in chunks of 64 and of the default size, fused and not, the
+/// GPU with its own binding limit and with one that splits arrays in two.
+#[test]
+fn floats_sort_in_total_order_on_both_backends() {
+    const SOURCE: &str = r#"
+param n = 0
+pipeline floats {
+    keys = iota(n) → map<f32Data>(column: 0)
+    (sorted, order) = sortByKey(keys, iota(n))
+    out sorted
+    out order
+}
+"#;
+    let specials = [
+        f32::NAN,
+        -0.0,
+        0.0,
+        -f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::from_bits(0x7F80_0001),
+        f32::from_bits(0xFFFF_FFFF),
+        1.0,
+        -1.0,
+        f32::from_bits(1),
+        f32::from_bits(0x8000_0001),
+        f32::MAX,
+        f32::MIN,
+        3.0,
+    ];
+    let library = library();
+    let gpu = crate::gpu();
+    let split = gpu.map(|gpu| {
+        gpu.with_limits(GpuLimits {
+            max_binding_bytes: 3000,
+            ..gpu.limits
+        })
+    });
+    for n in [0usize, 1, 2, 13, 257, 1399, 4099, 9001] {
+        let keys: Vec<f32> = (0..n)
+            .map(|i| specials[(i * 7 + i / 5) % specials.len()])
+            .collect();
+        let order = stable_order(&keys, f32::total_cmp);
+        let expected_keys: Vec<u32> = order.iter().map(|&p| keys[p].to_bits()).collect();
+        let expected_order: Vec<u32> = order.iter().map(|&p| p as u32).collect();
+        let data = crate::data::Data::new(vec![Column::F32(keys)]);
+        let check = |result: RunResult, how: &str| {
+            let outputs: HashMap<String, OutputValue> = result.outputs.into_iter().collect();
+            assert_eq!(
+                bits(&f32s(&outputs, "sorted")),
+                expected_keys,
+                "{n} keys, {how}"
+            );
+            assert_eq!(u32s(&outputs, "order"), expected_order, "{n} keys, {how}");
+        };
+        for fuse in [true, false] {
+            let options = CompileOptions {
+                fuse,
+                overrides: vec![("n".to_string(), n.to_string())],
+            };
+            let plan = compile_text(Path::new("floats.dpp"), SOURCE, &library, &options)
+                .unwrap_or_else(|e| panic!("{}", e.render(false)));
+            for (threads, chunk) in [
+                (1, 64),
+                (2, 64),
+                (2, dpp_runtime::cpu::kernels::DEFAULT_CHUNK),
+            ] {
+                let result =
+                    run_plan_on_cpu(&plan, &library, &data, threads, chunk, &ColumnPool::new());
+                check(
+                    result,
+                    &format!("CPU, {threads} threads, chunks of {chunk}"),
+                );
+            }
+            if let (Some(gpu), Some(split)) = (gpu, &split) {
+                check(run_plan_on_gpu(&plan, &library, &data, gpu), "GPU");
+                // Up to 2 segments per array, as in `arrays_split_into_segments_still_match`:
+                // more would bind more buffers than a kernel may have.
+                if n <= 1400 {
+                    check(
+                        run_plan_on_gpu(&plan, &library, &data, split),
+                        "GPU, split arrays",
+                    );
+                }
+            }
+        }
+    }
 }
 
 fn u32s(outputs: &HashMap<String, OutputValue>, name: &str) -> Vec<u32> {
@@ -249,6 +438,61 @@ fn f32s(outputs: &HashMap<String, OutputValue>, name: &str) -> Vec<f32> {
         OutputValue::Array(column) => column.view().as_f32().to_vec(),
         other => panic!("{name}: {other:?}"),
     }
+}
+
+fn column(outputs: &HashMap<String, OutputValue>, name: &str) -> Arc<Column> {
+    match &outputs[name] {
+        OutputValue::Array(column) => column.clone(),
+        other => panic!("{name}: {other:?}"),
+    }
+}
+
+fn bits(values: &[f32]) -> Vec<u32> {
+    values.iter().map(|x| x.to_bits()).collect()
+}
+
+/// The positions of `keys` in stable ascending order of `compare`.
+fn stable_order<K>(keys: &[K], compare: impl Fn(&K, &K) -> std::cmp::Ordering) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..keys.len()).collect();
+    order.sort_by(|&x, &y| compare(&keys[x], &keys[y]));
+    order
+}
+
+/// `sort` and `sortByKey` against Rust's stable sorts (`f32::total_cmp` is
+/// the order of docs/language.md §3, sort).
+fn check_sorts_against_reference(case: &Case, outputs: &HashMap<String, OutputValue>) {
+    let Case {
+        a,
+        b,
+        idx,
+        f,
+        fk,
+        ik,
+        pairs,
+        ..
+    } = case;
+    let mut sorted_a = a.clone();
+    sorted_a.sort();
+    assert_eq!(u32s(outputs, "sortedA"), sorted_a);
+    let mut sums: Vec<u32> = a.iter().zip(b).map(|(x, y)| x.wrapping_add(*y)).collect();
+    sums.sort();
+    assert_eq!(u32s(outputs, "sortedSums"), sums);
+    let order = stable_order(idx, u32::cmp);
+    let pick_u32 = |values: &[u32]| -> Vec<u32> { order.iter().map(|&p| values[p]).collect() };
+    assert_eq!(u32s(outputs, "sortedIdx"), pick_u32(idx));
+    let positions: Vec<u32> = order.iter().map(|&p| p as u32).collect();
+    assert_eq!(u32s(outputs, "idxOrder"), positions, "stable");
+    let order = stable_order(fk, f32::total_cmp);
+    let sorted_fk: Vec<f32> = order.iter().map(|&p| fk[p]).collect();
+    assert_eq!(bits(&f32s(outputs, "sortedFk")), bits(&sorted_fk));
+    let ids: Vec<u32> = order.iter().map(|&p| pairs.0[p]).collect();
+    let weights: Vec<f32> = order.iter().map(|&p| pairs.1[p]).collect();
+    assert_eq!(*column(outputs, "fkPairs"), pair_column(&ids, &weights));
+    let order = stable_order(ik, i32::cmp);
+    let sorted_ik: Vec<i32> = order.iter().map(|&p| ik[p]).collect();
+    assert_eq!(column(outputs, "sortedIk").view().as_i32(), sorted_ik);
+    let moved: Vec<f32> = order.iter().map(|&p| f[p]).collect();
+    assert_eq!(bits(&f32s(outputs, "ikValues")), bits(&moved));
 }
 
 fn host(outputs: &HashMap<String, OutputValue>, name: &str) -> HostValue {
@@ -380,6 +624,7 @@ fn check_against_reference(case: &Case, outputs: &HashMap<String, OutputValue>) 
         running += *x as f64;
         assert!((*got as f64 - running).abs() <= 1e-3 * (1.0 + running.abs()) + 0.1);
     }
+    check_sorts_against_reference(case, outputs);
 }
 
 proptest! {

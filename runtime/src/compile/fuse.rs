@@ -1,8 +1,8 @@
 //! Pass 6: group ops into stages (docs/language.md §6). With fusion on,
 //! consecutive ops over the same index space share a stage:
 //! map → map (rule 1), a gather's indexed read moves into its consumer
-//! (rule 2), and a map runs inside the scatter, reduce or scan that consumes
-//! it (rule 3). Stages end at the barriers of rule 4. An intermediate that
+//! (rule 2), and a map runs inside the scatter, reduce, scan or sort that
+//! consumes it (rule 3). Stages end at the barriers of rule 4. An intermediate that
 //! nothing outside its stage reads is never materialised.
 //!
 //! A scatter is not a barrier (rule 4 does not list it): ops after it go on
@@ -241,6 +241,7 @@ impl StageFormer<'_> {
                     }
                     let sink = match op.kind {
                         OpKind::Scan { .. } => Some(Barrier::Scan),
+                        OpKind::Sort { .. } => Some(Barrier::Sort),
                         OpKind::Reduce { .. } => Some(Barrier::Reduce),
                         _ => None,
                     };
@@ -543,10 +544,7 @@ impl StageFormer<'_> {
                     || self.usage.definitions[i] > 1
                     || self.usage.outputs.contains(&o)
                     || read_elsewhere
-                    || matches!(
-                        op.kind,
-                        OpKind::Reduce { .. } | OpKind::Scan { .. } | OpKind::Scatter { .. }
-                    );
+                    || op.is_sink();
                 if !keep {
                     continue;
                 }

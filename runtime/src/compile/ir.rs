@@ -104,7 +104,8 @@ impl HostFunction {
     }
 }
 
-/// The primitives: the callees that take a functor in angle brackets.
+/// The primitives: the callees that take a functor in angle brackets, and
+/// `gather`, `scatter`, `sort` and `sortByKey`, which may take none.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub enum Primitive {
     Map,
@@ -113,16 +114,20 @@ pub enum Primitive {
     Reduce,
     Scan,
     ExclusiveScan,
+    Sort,
+    SortByKey,
 }
 
 impl Primitive {
-    pub const ALL: [Primitive; 6] = [
+    pub const ALL: [Primitive; 8] = [
         Primitive::Map,
         Primitive::Gather,
         Primitive::Scatter,
         Primitive::Reduce,
         Primitive::Scan,
         Primitive::ExclusiveScan,
+        Primitive::Sort,
+        Primitive::SortByKey,
     ];
 
     /// The name as written in a pipeline.
@@ -134,6 +139,8 @@ impl Primitive {
             Primitive::Reduce => "reduce",
             Primitive::Scan => "scan",
             Primitive::ExclusiveScan => "exclusiveScan",
+            Primitive::Sort => "sort",
+            Primitive::SortByKey => "sortByKey",
         }
     }
 
@@ -224,6 +231,11 @@ pub enum OpKind {
         exclusive: bool,
         segments: Option<VarId>,
     },
+    /// `sort(keys)`: inputs `[keys]`, outputs `[sorted]`; `sortByKey(keys,
+    /// values)`: inputs `[keys, values]`, outputs `[sortedKeys, sortedValues]`.
+    /// Stable and ascending, f32 keys in the total order of their bits
+    /// (docs/language.md §3, sort).
+    Sort { by_key: bool },
 }
 
 /// An operand of an [`OpKind::Elementwise`] op.
@@ -298,6 +310,8 @@ impl Op {
             OpKind::Scan {
                 exclusive: true, ..
             } => Primitive::ExclusiveScan,
+            OpKind::Sort { by_key: false } => Primitive::Sort,
+            OpKind::Sort { by_key: true } => Primitive::SortByKey,
         })
     }
 
@@ -332,11 +346,14 @@ impl Op {
     }
 
     /// Whether the op combines its stage's elements into a result that is
-    /// complete only when the stage ends (scatter, reduce, scan).
+    /// complete only when the stage ends (scatter, reduce, scan, sort).
     pub fn is_sink(&self) -> bool {
         matches!(
             self.kind,
-            OpKind::Scatter { .. } | OpKind::Reduce { .. } | OpKind::Scan { .. }
+            OpKind::Scatter { .. }
+                | OpKind::Reduce { .. }
+                | OpKind::Scan { .. }
+                | OpKind::Sort { .. }
         )
     }
 
@@ -368,6 +385,8 @@ pub enum Barrier {
     Unfused,
     /// A scan needs every element before its result exists.
     Scan,
+    /// A sort needs every key before any element's place is known.
+    Sort,
     /// The host reads a reduce result.
     Reduce,
     /// A scatter writes through an index: its result is complete only at the end.
@@ -385,6 +404,7 @@ impl Barrier {
         match self {
             Barrier::Unfused => "unfused",
             Barrier::Scan => "scan",
+            Barrier::Sort => "sort",
             Barrier::Reduce => "reduce result read by the host",
             Barrier::Scatter => "scatter",
             Barrier::LengthChange => "length change",

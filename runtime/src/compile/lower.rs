@@ -1480,6 +1480,22 @@ impl Lowerer<'_, '_> {
                     Some(2),
                 )
             }
+            // No functor: the order is the keys' own (docs/language.md §3, sort).
+            Primitive::Sort | Primitive::SortByKey => {
+                if let Some((f, _)) = &functor {
+                    self.error(
+                        Diagnostic::error(
+                            Code::FunctorKind,
+                            format!("`{primitive}` takes no functor"),
+                            f.span,
+                        )
+                        .with_help("it sorts ascending by the keys' own order; map the keys first to order by something else"),
+                    );
+                    return Value::Error;
+                }
+                let by_key = primitive == Primitive::SortByKey;
+                (OpKind::Sort { by_key }, &[], Some(1 + usize::from(by_key)))
+            }
             Primitive::Reduce | Primitive::Scan | Primitive::ExclusiveScan => {
                 let Some((f, signature)) = functor.as_ref() else {
                     self.error(Diagnostic::error(
@@ -1608,6 +1624,7 @@ impl Lowerer<'_, '_> {
 
         let output_count = match (&kind, &functor) {
             (OpKind::Reduce { .. }, _) => 1,
+            (OpKind::Sort { by_key: true }, _) => 2,
             (_, Some((_, s)))
                 if matches!(
                     kind,

@@ -486,6 +486,24 @@ impl Checker<'_> {
                 };
                 self.assign(op.outputs[0], VarType::Array(source), len, op.span);
             }
+            OpKind::Sort { by_key } => {
+                let keys = input_types[0];
+                if !is_sort_key(keys) {
+                    let ty = keys.name(self.records());
+                    let primitive = op.label();
+                    self.mismatch(
+                        op.span,
+                        format!("`{primitive}` keys must be u32, i32 or f32, found {ty}"),
+                    );
+                    return;
+                }
+                if *by_key {
+                    self.check_same_length(op, &op.inputs);
+                }
+                for (output, ty) in op.outputs.iter().zip(input_types) {
+                    self.assign(*output, VarType::Array(ty), first_len.clone(), op.span);
+                }
+            }
             OpKind::Reduce { op: monoid } | OpKind::Scan { op: monoid, .. } => {
                 let ty = input_types[0];
                 if !monoid_supports(*monoid, ty) {
@@ -574,6 +592,11 @@ impl Checker<'_> {
             })
             .collect()
     }
+}
+
+/// Whether `sort` and `sortByKey` order keys of this type (docs/language.md §3, sort).
+pub fn is_sort_key(ty: ElemType) -> bool {
+    matches!(ty, ElemType::U32 | ElemType::I32 | ElemType::F32)
 }
 
 /// The type of a host expression; `Ok(None)` when an operand is already in error.

@@ -175,6 +175,7 @@ impl Validator<'_> {
             OpKind::GroupGather { .. } | OpKind::Expand { .. } => (Some(1), Some(true)),
             OpKind::Scatter { combine, .. } => (Some(2), Some(combine.is_some())),
             OpKind::Reduce { .. } | OpKind::Scan { .. } => (Some(1), Some(true)),
+            OpKind::Sort { by_key } => (Some(1 + usize::from(*by_key)), Some(false)),
         };
         let label = op.label();
         if let Some(expected) = inputs.filter(|&n| n != op.inputs.len()) {
@@ -191,6 +192,8 @@ impl Validator<'_> {
         }
         let outputs_ok = match op.kind {
             OpKind::Map | OpKind::Elementwise { .. } => !op.outputs.is_empty(),
+            // One sorted array per input.
+            OpKind::Sort { .. } => op.outputs.len() == op.inputs.len(),
             _ => op.outputs.len() == 1,
         };
         if !outputs_ok {

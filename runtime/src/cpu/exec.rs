@@ -7,6 +7,7 @@
 use super::column_pool::{ColumnPool, Contents};
 use super::kernels::{self, ScanTotal};
 use super::shared_scatter::{Claimed, Owners, ScatterClaims, SharedTarget};
+use super::sort::SortedOrder;
 use crate::column::{Column, ColumnView};
 use crate::compile::ir::*;
 use crate::elem::Element;
@@ -146,6 +147,8 @@ enum SinkPart {
         flags: Option<ChunkValue>,
         total: ScanTotal,
     },
+    /// A sort's keys and values: sorted, all chunks together, after the stage.
+    Sort(Vec<ChunkValue>),
 }
 
 /// The targets of a stage's plain scatters, which its chunks write directly.
@@ -405,7 +408,7 @@ impl StageRun<'_, '_> {
     }
 
     /// Assembles the result of the stage's sink `number` (counted in stage
-    /// order) from every chunk's part: a combining scatter, a reduce or a scan.
+    /// order) from every chunk's part: a combining scatter, a reduce, a scan or a sort.
     fn finish_sink(
         &mut self,
         op: &Op,
@@ -496,6 +499,51 @@ impl StageRun<'_, '_> {
                     })
                     .map_err(RunError::from)?;
                 self.store(op.outputs[0], target.into_column());
+            }
+            OpKind::Sort { .. } => {
+                // Each input as the chunks' views of it, in chunk order.
+                let parts = |input: usize| -> Vec<ColumnView<'_>> {
+                    results
+                        .iter()
+                        .map(|result| match &result.sinks[number] {
+                            SinkPart::Sort(inputs) => inputs[input].view(&result.range),
+                            _ => unreachable!(),
+                        })
+                        .collect()
+                };
+                let key_type = self.elem_type(op.inputs[0]);
+                let order = SortedOrder::new(key_type, &parts(0)).map_err(RunError::from)?;
+                let len = order.len();
+                let pool = self.context.column_pool;
+                let keys = pool.take(key_type, len, Contents::Overwritten, records);
+                let keys = order.keys_into(keys).map_err(RunError::from)?;
+                let sorted_values = match op.inputs.get(1) {
+                    Some(&values) => {
+                        let ty = self.elem_type(values);
+                        // Values made before the stage are read where they are.
+                        let whole = results.first().and_then(|r| match &r.sinks[number] {
+                            SinkPart::Sort(inputs) => match &inputs[1] {
+                                ChunkValue::Whole(array) => Some(array.clone()),
+                                ChunkValue::Chunk(_) => None,
+                            },
+                            _ => None,
+                        });
+                        let joined = whole.unwrap_or_else(|| {
+                            Arc::new(Column::concat_views(ty, &parts(1), records))
+                        });
+                        let target = pool.take(ty, len, Contents::Overwritten, records);
+                        Some(
+                            order
+                                .values_into(&joined.view(), target)
+                                .map_err(RunError::from)?,
+                        )
+                    }
+                    None => None,
+                };
+                self.store(op.outputs[0], keys);
+                if let Some(sorted_values) = sorted_values {
+                    self.store(op.outputs[1], sorted_values);
+                }
             }
             _ => unreachable!("plain scatters finish in `finish_direct_scatter`"),
         }
@@ -676,6 +724,10 @@ impl StageRun<'_, '_> {
                         flags,
                         total,
                     });
+                }
+                OpKind::Sort { .. } => {
+                    let inputs = op.inputs.iter().map(|v| lookup(&locals, *v));
+                    sinks.push(SinkPart::Sort(inputs.collect::<Result<_, _>>()?));
                 }
                 OpKind::Elementwise { .. } => {
                     return Err(RunError::internal(format!(

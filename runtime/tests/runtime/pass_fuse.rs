@@ -3,8 +3,8 @@
 //! 1. `map → map` over the same index space share a stage; an intermediate
 //!    that nothing else reads is not materialised, one read elsewhere is.
 //! 2. `gather(idx, src) → map`: the indexed read moves into the consumer.
-//! 3. `map → scatter`, `map → reduce`, `map → scan` run in one stage.
-//! 4. Barriers: scan, reduce, a length change, a loop or branch boundary.
+//! 3. `map → scatter`, `map → reduce`, `map → scan`, `map → sort` run in one stage.
+//! 4. Barriers: scan, sort, reduce, a length change, a loop or branch boundary.
 //!
 //! `check!(source, @"…")` shows the fused plan's text. It also checks that the
 //! unfused plan (`--no-fuse`) has one op per stage and the same ops, and RUNS
@@ -363,6 +363,61 @@ fn rule4_scan_and_reduce_end_their_stages() {
     out z = z
     ---
     z = [20, 22, 25, 29, 34, 40]
+    "
+    );
+}
+
+#[test]
+fn rule4_a_sort_ends_the_stage_of_its_keys_and_values() {
+    // The maps that make the keys and values run in the sort's stage; the
+    // sorted arrays are whole arrays for the next stage (f32 keys: -0 before
+    // +0, equal keys in their order).
+    check!(
+        r#"
+        param n = 6
+        pipeline p {
+            x = iota(n) → map<toF32>
+            k = map<mul>(map<sub>(fill(n, 2.0), x), map<sub>(x, fill(n, 2.0)))
+            (sk, sx) = sortByKey(map<neg>(map<abs>(k)), x)
+            out sx
+            out s = map<add>(sk, sx)
+            out u = sort(iota(n))
+        }
+        "#,
+        @"
+    pipeline p (fused, 2 stages)
+    param n: int = 6
+    let n: int = 6
+    stage 1 [iota → map<toF32> → fill → map<sub> → map<sub> → map<mul> → map<abs> → map<neg> → sortByKey] {
+      over n
+      %1 = iota(n)
+      x = map<toF32>(%1)
+      %4 = fill(n, 2.0)
+      %5 = map<sub>(%4, x)
+      %7 = map<sub>(x, %4)
+      k = map<mul>(%5, %7)
+      %10 = map<abs>(k)
+      %11 = map<neg>(%10)
+      (sk, sx) = sortByKey(%11, x)
+      reads direct: -; indexed: -; uniform: n
+      materialises %1: u32, sk: f32, sx: f32
+      ends at sort
+    }
+    out sx = sx
+    stage 2 [map<add> → sort] {
+      over n
+      s = map<add>(sk, sx)
+      u = sort(%1)
+      reads direct: sk: f32, sx: f32, %1: u32; indexed: -; uniform: -
+      materialises s: f32, u: u32
+      ends at sort
+    }
+    out s = s
+    out u = u
+    ---
+    sx = [5.0, 0.0, 4.0, 1.0, 3.0, 2.0]
+    s = [-4.0, -4.0, 0.0, 0.0, 2.0, 2.0]
+    u = [0, 1, 2, 3, 4, 5]
     "
     );
 }
