@@ -117,6 +117,75 @@ pub trait Functor: Send + Sync {
     }
 }
 
+/// [`Functor::run_cpu`] as a closure.
+pub type CpuBody = dyn Fn(&CallContext<'_>, &[ColumnView<'_>], &mut [Column]) -> Result<(), FunctorError>
+    + Send
+    + Sync;
+
+/// [`Functor::wgsl`] as a closure, handed the functor's signature.
+pub type TwinBody =
+    dyn Fn(&Signature, &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> + Send + Sync;
+
+/// A functor made of its parts: a signature, a CPU body and (for the GPU
+/// backend) a twin. The generic functors and the tracer's are all this, each
+/// family with its own helper that turns what is particular to a functor into
+/// the two bodies, so that no functor writes the [`Functor`] impl itself.
+pub struct ClosureFunctor {
+    signature: Signature,
+    cpu: Box<CpuBody>,
+    twin: Option<Box<TwinBody>>,
+}
+
+impl ClosureFunctor {
+    /// A functor without a twin (it runs on the CPU backend only).
+    pub fn new(
+        signature: Signature,
+        cpu: impl Fn(&CallContext<'_>, &[ColumnView<'_>], &mut [Column]) -> Result<(), FunctorError>
+            + Send
+            + Sync
+            + 'static,
+    ) -> ClosureFunctor {
+        ClosureFunctor {
+            signature,
+            cpu: Box::new(cpu),
+            twin: None,
+        }
+    }
+
+    pub fn with_twin(
+        mut self,
+        twin: impl Fn(&Signature, &WgslRequest<'_>) -> Result<WgslTwin, FunctorError>
+            + Send
+            + Sync
+            + 'static,
+    ) -> ClosureFunctor {
+        self.twin = Some(Box::new(twin));
+        self
+    }
+}
+
+impl Functor for ClosureFunctor {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+
+    fn run_cpu(
+        &self,
+        ctx: &CallContext<'_>,
+        inputs: &[ColumnView<'_>],
+        outputs: &mut [Column],
+    ) -> Result<(), FunctorError> {
+        (self.cpu)(ctx, inputs, outputs)
+    }
+
+    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
+        match &self.twin {
+            Some(twin) => twin(&self.signature, request),
+            None => Err(no_twin(self.signature.name)),
+        }
+    }
+}
+
 /// Every functor, record type and uniform a pipeline may name.
 #[derive(Clone, Default)]
 pub struct FunctorLibrary {
@@ -142,5 +211,62 @@ impl FunctorLibrary {
 
     pub fn iter(&self) -> impl Iterator<Item = &Arc<dyn Functor>> {
         self.functors.values()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::types::ElemType;
+
+    /// `doubled(x: u32) -> (y: u32)`, with a twin that names its signature.
+    fn doubled(with_twin: bool) -> ClosureFunctor {
+        let signature = Signature::map("doubled")
+            .input("x", ElemType::U32)
+            .output("y", ElemType::U32);
+        let functor = ClosureFunctor::new(signature, |_, inputs, outputs| {
+            *outputs[0].as_u32_mut() = inputs[0].as_u32().iter().map(|x| 2 * x).collect();
+            Ok(())
+        });
+        if !with_twin {
+            return functor;
+        }
+        functor.with_twin(|signature, request| {
+            Ok(WgslTwin {
+                source: format!("// {} as {}", signature.name, request.function),
+                ..WgslTwin::default()
+            })
+        })
+    }
+
+    #[test]
+    fn a_closure_functor_runs_its_closures() {
+        let records = RecordRegistry::default();
+        let ctx = CallContext {
+            named: &[],
+            uniforms: &Uniforms::default(),
+            resources: &(),
+            first_index: 0,
+            group: 1,
+            records: &records,
+        };
+        let input = Column::U32(vec![1, 5]);
+        let mut outputs = [Column::U32(Vec::new())];
+        let functor = doubled(true);
+        functor
+            .run_cpu(&ctx, &[input.view()], &mut outputs)
+            .unwrap();
+        assert_eq!(outputs[0], Column::U32(vec![2, 10]));
+        assert_eq!(functor.signature().name, "doubled");
+        let request = WgslRequest {
+            function: "stage0_doubled",
+            inputs: &[ElemType::U32],
+            outputs: &[ElemType::U32],
+            records: &records,
+            resources: &(),
+        };
+        let twin = functor.wgsl(&request).unwrap();
+        assert_eq!(twin.source, "// doubled as stage0_doubled");
+        assert_eq!(doubled(false).wgsl(&request), Err(no_twin("doubled")));
     }
 }

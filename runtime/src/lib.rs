@@ -13,7 +13,7 @@ pub mod types;
 
 pub use column::{Column, ColumnView};
 pub use error::ErrorKind;
-pub use functor::{CallContext, Functor, FunctorError, FunctorLibrary};
+pub use functor::{CallContext, ClosureFunctor, Functor, FunctorError, FunctorLibrary};
 pub use host::{HostValue, UniformSchema, Uniforms};
 pub use monoid::MonoidOp;
 pub use signature::{ArrayParam, FunctorKind, NamedParam, Signature, TypeConstraint, TypePattern};

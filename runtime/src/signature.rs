@@ -190,18 +190,24 @@ impl Signature {
 
     /// Appends a named argument; `default: None` makes it required.
     pub fn named(
-        mut self,
+        self,
         name: &'static str,
         ty: HostType,
         default: Option<HostValue>,
         doc: &'static str,
     ) -> Signature {
-        self.named.push(NamedParam {
+        self.named_param(NamedParam {
             name,
             ty,
             default,
             doc,
-        });
+        })
+    }
+
+    /// Appends a named argument that several functors share, spelt once as a
+    /// constant beside the code that reads it.
+    pub fn named_param(mut self, param: NamedParam) -> Signature {
+        self.named.push(param);
         self
     }
 

@@ -28,7 +28,6 @@ pub use scene::{SceneError, TraceResources, TraceScene};
 pub use shading::{PointLight, SceneFile, Shading, ShadingError, ShadingOverrides};
 
 use dpp_runtime::{ElemType, FunctorLibrary, HostType, HostValue, RecordId, RecordType, Uniforms};
-use std::sync::Arc;
 
 /// The uniform fields the tracer fills, by record: `(record, field, type)`.
 pub const UNIFORM_FIELDS: [(&str, &str, HostType); 15] = [
@@ -64,25 +63,25 @@ pub fn register_tracer_functors(library: &mut FunctorLibrary) -> TracerRecords {
         material,
         light,
     } = records;
-    let functors: Vec<Arc<dyn dpp_runtime::Functor>> = vec![
-        Arc::new(camera_ray::CameraRay::new(ray)),
-        Arc::new(intersect::Intersect::new(ray, hit)),
-        Arc::new(occluded::Occluded::new(ray)),
-        Arc::new(normal_color::NormalColor::new(ray, hit)),
-        Arc::new(surface::SurfaceFunctor::new(ray, hit, surface)),
-        Arc::new(shadow_ray::ShadowRay::new(surface, ray)),
-        Arc::new(occ_ray_gen::OccRayGen::new(surface, ray)),
-        Arc::new(visible_lights::VisibleLights::new()),
-        Arc::new(shader::Shader::new(surface)),
-        Arc::new(reflect_ray::ReflectRay::new(surface, ray)),
-        Arc::new(alive::Alive::new(ray)),
-        Arc::new(anti_alias::AntiAlias::new()),
-        Arc::new(global_id::GlobalId::new()),
-        Arc::new(material::MaterialFunctor::new(material)),
-        Arc::new(light::LightFunctor::new(light)),
-        Arc::new(colormap::Colormap::new()),
-        Arc::new(with_weight::WithWeight::new(ray)),
-        Arc::new(clip_ray::ClipRay::new(ray)),
+    let functors = [
+        camera_ray::functor(ray),
+        intersect::functor(ray, hit),
+        occluded::functor(ray),
+        normal_color::functor(ray, hit),
+        surface::functor(ray, hit, surface),
+        shadow_ray::functor(surface, ray),
+        occ_ray_gen::functor(surface, ray),
+        visible_lights::functor(),
+        shader::functor(surface),
+        reflect_ray::functor(surface, ray),
+        alive::functor(ray),
+        anti_alias::functor(),
+        global_id::functor(),
+        material::functor(material),
+        light::functor(light),
+        colormap::functor(),
+        with_weight::functor(ray),
+        clip_ray::functor(ray),
     ];
     for functor in functors {
         library.register(functor);
@@ -106,11 +105,9 @@ pub fn register_isosurface_functors(library: &mut FunctorLibrary) -> RecordId {
     for (record, field, ty) in functors::isosurface::VOLUME_UNIFORM_FIELDS {
         library.uniforms.declare(record, field, ty);
     }
-    library.register(Arc::new(functors::cube_case::CubeCase::new()));
-    library.register(Arc::new(functors::case_triangles::CaseTriangles::new()));
-    library.register(Arc::new(functors::cube_triangle::CubeTriangle::new(
-        triangle,
-    )));
+    library.register(functors::cube_case::functor());
+    library.register(functors::case_triangles::functor());
+    library.register(functors::cube_triangle::functor(triangle));
     triangle
 }
 
@@ -122,16 +119,16 @@ pub fn register_isosurface_functors(library: &mut FunctorLibrary) -> RecordId {
 pub fn register_volume_render_functors(library: &mut FunctorLibrary, ray: RecordId) -> RecordId {
     use functors::*;
     let march = volume_render::register_march_record(&mut library.records);
-    let functors: Vec<Arc<dyn dpp_runtime::Functor>> = vec![
-        Arc::new(volume_entry::VolumeEntry::new(ray, march)),
-        Arc::new(volume_march::VolumeMarch::new(march)),
-        Arc::new(march_live::MarchLive::new(march)),
-        Arc::new(over_background::OverBackground::new()),
-        Arc::new(cell_range::CellRange::new()),
-        Arc::new(cell_block::CellBlock::new()),
-        Arc::new(transparent::Transparent::new()),
-        Arc::new(march_block::MarchBlock::new(march)),
-        Arc::new(skip_empty::SkipEmpty::new(march)),
+    let functors = [
+        volume_entry::functor(ray, march),
+        volume_march::functor(march),
+        march_live::functor(march),
+        over_background::functor(),
+        cell_range::functor(),
+        cell_block::functor(),
+        transparent::functor(),
+        march_block::functor(march),
+        skip_empty::functor(march),
     ];
     for functor in functors {
         library.register(functor);

@@ -4,7 +4,9 @@ use crate::builtin_scene::{builtin_scene, ResolutionOutOfRange};
 use crate::bvh::Bvh;
 use crate::cache::{ArcKeyedCache, BuiltOnce};
 use crate::camera::CameraSetup;
-use crate::functors::wgsl::buffers::{CameraGpuBuffers, SceneGpuBuffers, ShadingGpuBuffers};
+use crate::functors::wgsl::buffers::{
+    CameraGpuBuffers, SceneGpuBuffers, ShadingGpuBuffers, VolumeGpuBuffers,
+};
 use crate::mesh::{Bounds, MeshError, TriangleMesh};
 use crate::obj::{load_obj_with_materials, ObjError};
 use crate::shading::{MeshMaterials, Shading};
@@ -232,6 +234,13 @@ impl TraceResources {
     pub fn shading_gpu_buffers(&self) -> ShadingGpuBuffers {
         self.shading_gpu_buffers
             .get_or_build(&self.shading, ShadingGpuBuffers::new)
+    }
+
+    /// The run's volume as the GPU twins read it, built once per volume; the
+    /// errors name `functor`.
+    pub fn volume_gpu_buffers(&self, functor: &str) -> Result<VolumeGpuBuffers, FunctorError> {
+        VolumeGpuBuffers::of_volume(self.volume(functor)?)
+            .map_err(|e| FunctorError::bad_input(format!("{functor}: {}", e.message)))
     }
 
     /// The uniforms of this scene, camera and shading (see [`crate::uniforms`]),

@@ -9,7 +9,7 @@ mod grouped;
 mod math;
 
 use crate::column::{Column, ColumnView};
-use crate::functor::{CallContext, Functor, FunctorError, FunctorLibrary};
+use crate::functor::{CallContext, ClosureFunctor, Functor, FunctorError, FunctorLibrary};
 use crate::monoid::combine_columns;
 use crate::monoid::MonoidOp;
 use crate::signature::{Signature, TypeConstraint, TypePattern};
@@ -38,70 +38,41 @@ const BOOL: TypePattern = TypePattern::Exact(ElemType::Bool);
 const U32: TypePattern = TypePattern::Exact(ElemType::U32);
 const F32: TypePattern = TypePattern::Exact(ElemType::F32);
 
-/// The CPU implementation of a generic functor: a chunk's inputs to its one output.
-type Kernel =
-    Box<dyn Fn(&CallContext<'_>, &[ColumnView<'_>]) -> Result<Column, FunctorError> + Send + Sync>;
-
-/// The WGSL twin of a generic functor: the body of its function for one
-/// instantiation (the element types of `request`), written by type.
-type Generator = Box<dyn Fn(&WgslRequest<'_>) -> Result<Body, FunctorError> + Send + Sync>;
-
-/// Every generic functor has one output, which its kernel builds whole, and a
-/// twin generated per instantiation.
-struct GenericFunctor {
-    signature: Signature,
-    kernel: Kernel,
-    twin: Generator,
-}
-
-impl Functor for GenericFunctor {
-    fn signature(&self) -> &Signature {
-        &self.signature
+/// `fn {function}({parameters}) -> Out { body }`, the header from the
+/// signature (so it always matches the calling convention), the body from
+/// `generate`, which writes it for the request's element types.
+fn generated_twin(
+    signature: &Signature,
+    request: &WgslRequest<'_>,
+    generate: &impl Fn(&WgslRequest<'_>) -> Result<Body, FunctorError>,
+) -> Result<WgslTwin, FunctorError> {
+    let (inputs, outputs) = (&signature.inputs, &signature.outputs);
+    if request.inputs.len() != inputs.len() || request.outputs.len() != outputs.len() {
+        return Err(FunctorError::bad_input(format!(
+            "internal error: a WGSL twin of `{}` was asked for {} inputs and {} outputs",
+            signature.name,
+            request.inputs.len(),
+            request.outputs.len()
+        )));
     }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        outputs[0] = (self.kernel)(ctx, inputs)?;
-        Ok(())
-    }
-
-    /// `fn {function}({parameters}) -> Out { body }`, the header from the
-    /// signature (so it always matches the calling convention), the body from
-    /// the functor's generator.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let (inputs, outputs) = (&self.signature.inputs, &self.signature.outputs);
-        if request.inputs.len() != inputs.len() || request.outputs.len() != outputs.len() {
-            return Err(FunctorError::bad_input(format!(
-                "internal error: a WGSL twin of `{}` was asked for {} inputs and {} outputs",
-                self.signature.name,
-                request.inputs.len(),
-                request.outputs.len()
-            )));
-        }
-        let body = (self.twin)(request)?;
-        let parameters: Vec<String> =
-            twin_parameters(&self.signature, request.inputs, request.records)
-                .into_iter()
-                .map(|(name, ty)| format!("{name}: {ty}"))
-                .collect();
-        let source = format!(
-            "fn {}({}) -> {} {{\n{}}}\n",
-            request.function,
-            parameters.join(", "),
-            output_type(request),
-            body.statements
-        );
-        Ok(WgslTwin {
-            source,
-            modules: body.modules,
-            buffers: Vec::new(),
-            failures: body.failures,
-        })
-    }
+    let body = generate(request)?;
+    let parameters: Vec<String> = twin_parameters(signature, request.inputs, request.records)
+        .into_iter()
+        .map(|(name, ty)| format!("{name}: {ty}"))
+        .collect();
+    let source = format!(
+        "fn {}({}) -> {} {{\n{}}}\n",
+        request.function,
+        parameters.join(", "),
+        output_type(request),
+        body.statements
+    );
+    Ok(WgslTwin {
+        source,
+        modules: body.modules,
+        buffers: Vec::new(),
+        failures: body.failures,
+    })
 }
 
 /// What a generator writes: the statements of a twin's function and what they need.
@@ -209,6 +180,8 @@ fn nan_ignoring_wgsl(better: &str, a: &str, b: &str, ty: ElemType) -> Option<Str
     ))
 }
 
+/// A generic functor: its one output built whole by `kernel`, its twin's body
+/// generated per instantiation by `twin`.
 fn functor(
     signature: Signature,
     kernel: impl Fn(&CallContext<'_>, &[ColumnView<'_>]) -> Result<Column, FunctorError>
@@ -217,11 +190,12 @@ fn functor(
         + 'static,
     twin: impl Fn(&WgslRequest<'_>) -> Result<Body, FunctorError> + Send + Sync + 'static,
 ) -> Arc<dyn Functor> {
-    Arc::new(GenericFunctor {
-        signature,
-        kernel: Box::new(kernel),
-        twin: Box::new(twin),
+    let functor = ClosureFunctor::new(signature, move |ctx, inputs, outputs| {
+        outputs[0] = kernel(ctx, inputs)?;
+        Ok(())
     })
+    .with_twin(move |signature, request| generated_twin(signature, request, &twin));
+    Arc::new(functor)
 }
 
 /// The error for input types the signature excludes: the type checker let a

@@ -57,12 +57,36 @@ pub mod wgsl;
 pub mod with_weight;
 
 use crate::bvh::{HitRecord, Ray};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
-    CallContext, Column, ColumnView, ElemType, FunctorError, RecordId, RecordRegistry, RecordType,
+    CallContext, ClosureFunctor, Column, ColumnView, ElemType, Functor, FunctorError, RecordId,
+    RecordRegistry, RecordType, Signature,
 };
 use glam::Vec3;
 use std::mem::MaybeUninit;
 use std::sync::Arc;
+use wgsl::TwinParts;
+
+/// A tracer functor of what its folder holds: its signature, its CPU body, and
+/// its twin, the folder's `twin.wgsl` template (`template`) instantiated with
+/// the parts `twin_parts` gives for each request (see [`wgsl::twin`]).
+pub(crate) fn tracer_functor(
+    signature: Signature,
+    cpu: impl Fn(&CallContext<'_>, &[ColumnView<'_>], &mut [Column]) -> Result<(), FunctorError>
+        + Send
+        + Sync
+        + 'static,
+    template: &'static str,
+    twin_parts: impl Fn(&WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError>
+        + Send
+        + Sync
+        + 'static,
+) -> Arc<dyn Functor> {
+    let functor = ClosureFunctor::new(signature, cpu).with_twin(move |signature, request| {
+        wgsl::twin(signature, request, template, twin_parts(request)?)
+    });
+    Arc::new(functor)
+}
 
 /// `Hit.prim` of a miss.
 pub const MISS_PRIM: u32 = u32::MAX;
@@ -82,6 +106,11 @@ pub struct TracerRecords {
     pub material: RecordId,
     pub light: RecordId,
 }
+
+/// The places of the `Ray` fields that functors edit alone (`clipRay`,
+/// `withWeight`) among its fields, in [`register_records`]' order.
+pub(crate) const RAY_TMAX_FIELD: usize = 2;
+pub(crate) const RAY_WEIGHT_FIELD: usize = 4;
 
 pub(crate) fn register_records(records: &mut RecordRegistry) -> TracerRecords {
     let ray = records.register(RecordType {
@@ -190,9 +219,9 @@ impl<'a> RayColumns<'a> {
         RayColumns {
             origin: view.field(0).as_vec3(),
             dir: view.field(1).as_vec3(),
-            tmax: view.field(2).as_f32(),
+            tmax: view.field(RAY_TMAX_FIELD).as_f32(),
             sample: view.field(3).as_u32(),
-            weight: view.field(4).as_vec3(),
+            weight: view.field(RAY_WEIGHT_FIELD).as_vec3(),
             depth: view.field(5).as_u32(),
         }
     }
@@ -471,10 +500,12 @@ pub(crate) struct SurfaceWriter<'a> {
 }
 
 impl<'a> SurfaceWriter<'a> {
-    pub fn new(column: &'a mut Column, capacity: usize) -> Result<SurfaceWriter<'a>, FunctorError> {
+    /// A writer of records appended by [`SurfaceWriter::extend_with`], which
+    /// reserves what it writes.
+    pub fn new(column: &'a mut Column) -> Result<SurfaceWriter<'a>, FunctorError> {
         let [position, normal, view, scalar, material, hit, sample, weight, depth, geometric] =
             record_fields_mut::<10>(column)?;
-        let writer = SurfaceWriter {
+        Ok(SurfaceWriter {
             position: position.as_vec3_mut(),
             normal: normal.as_vec3_mut(),
             view: view.as_vec3_mut(),
@@ -485,33 +516,13 @@ impl<'a> SurfaceWriter<'a> {
             weight: weight.as_vec3_mut(),
             depth: depth.as_u32_mut(),
             geometric: geometric.as_vec3_mut(),
-        };
-        writer.position.reserve(capacity);
-        writer.normal.reserve(capacity);
-        writer.view.reserve(capacity);
-        writer.scalar.reserve(capacity);
-        writer.material.reserve(capacity);
-        writer.hit.reserve(capacity);
-        writer.sample.reserve(capacity);
-        writer.weight.reserve(capacity);
-        writer.depth.reserve(capacity);
-        writer.geometric.reserve(capacity);
-        Ok(writer)
+        })
     }
 
     /// Appends one record (the tests build inputs with it).
     #[cfg(test)]
     pub fn push(&mut self, surface: SurfaceRecord) {
-        self.position.push(surface.position);
-        self.normal.push(surface.normal);
-        self.view.push(surface.view);
-        self.scalar.push(surface.scalar);
-        self.material.push(surface.material);
-        self.hit.push(surface.hit);
-        self.sample.push(surface.sample);
-        self.weight.push(surface.weight);
-        self.depth.push(surface.depth);
-        self.geometric.push(surface.geometric);
+        self.extend_with(1, |_| surface);
     }
 
     /// Appends `len` records, record `i` being `surface(i)`, in one pass that
@@ -653,6 +664,18 @@ pub(crate) fn named_f32(
     })
 }
 
+/// A copy of a chunk of records with field `field` made by `replace` from the
+/// old one, every other field kept.
+pub(crate) fn with_field_replaced(
+    records: &ColumnView<'_>,
+    field: usize,
+    replace: impl FnOnce(&ColumnView<'_>) -> Column,
+) -> Column {
+    let mut copy = records.to_column();
+    *copy.field_mut(field) = replace(records.field(field));
+    copy
+}
+
 /// Mutable access to all `N` field columns of a record output at once (the
 /// runtime's `field_mut` borrows one at a time).
 pub(crate) fn record_fields_mut<const N: usize>(
@@ -699,6 +722,23 @@ pub(crate) mod test_support {
             sample,
             weight: Vec3::ONE,
             depth: 0,
+        }
+    }
+
+    /// A hit at `position` whose shading normal, geometric normal and view
+    /// vector are all `normal`: material 0, scalar 0, weight 1, depth 0.
+    pub fn surface_hit(position: Vec3, normal: Vec3, sample: u32) -> SurfaceRecord {
+        SurfaceRecord {
+            position,
+            normal,
+            view: normal,
+            scalar: 0.0,
+            material: 0,
+            hit: true,
+            sample,
+            weight: Vec3::ONE,
+            depth: 0,
+            geometric: normal,
         }
     }
 
@@ -847,7 +887,7 @@ pub(crate) mod test_support {
     pub fn surface_column(records: &RecordRegistry, surfaces: &[SurfaceRecord]) -> Column {
         let ty = ElemType::Record(records.find("Surface").unwrap());
         let mut column = Column::with_capacity(ty, 0, records);
-        let mut writer = SurfaceWriter::new(&mut column, surfaces.len()).unwrap();
+        let mut writer = SurfaceWriter::new(&mut column).unwrap();
         surfaces.iter().for_each(|&surface| writer.push(surface));
         column
     }

@@ -1,54 +1,41 @@
 //! `alive(ray: Ray) -> (alive: bool)`: `tmax > 0` (false for NaN), the mask a
 //! pipeline compacts its rays with.
 
-use crate::functors::wgsl::{twin, vector_module, TwinParts};
+use crate::functors::tracer_functor;
+use crate::functors::wgsl::{vector_module, TwinParts};
 use crate::functors::RayColumns;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
+use std::sync::Arc;
 
-pub struct Alive {
-    signature: Signature,
+pub fn functor(ray: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("alive")
+        .input("ray", ElemType::Record(ray))
+        .output("alive", ElemType::Bool)
+        .doc("whether the ray is alive: tmax > 0");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl Alive {
-    pub fn new(ray: RecordId) -> Alive {
-        Alive {
-            signature: Signature::map("alive")
-                .input("ray", ElemType::Record(ray))
-                .output("alive", ElemType::Bool)
-                .doc("whether the ray is alive: tmax > 0"),
-        }
-    }
+/// `twin.wgsl`: `tmax > 0` on the bits.
+fn twin_parts(_: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    Ok(TwinParts {
+        modules: vec![vector_module()],
+        ..TwinParts::default()
+    })
 }
 
-impl Functor for Alive {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    /// `twin.wgsl`: `tmax > 0` on the bits.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let parts = TwinParts {
-            modules: vec![vector_module()],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        _ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let rays = RayColumns::new(&inputs[0]);
-        outputs[0]
-            .as_bool_mut()
-            .extend(rays.tmax.iter().map(|&tmax| tmax > 0.0));
-        Ok(())
-    }
+fn run_cpu(
+    _ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let rays = RayColumns::new(&inputs[0]);
+    outputs[0]
+        .as_bool_mut()
+        .extend(rays.tmax.iter().map(|&tmax| tmax > 0.0));
+    Ok(())
 }
 
 #[cfg(test)]

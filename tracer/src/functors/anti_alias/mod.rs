@@ -8,79 +8,65 @@
 //! (the shader's) ends with `antiAlias`, with `group: 1` when it takes one
 //! sample per pixel. NaN components become 0.
 
-use crate::functors::wgsl::{f32_literal, twin, vector_module, TwinParts};
+use crate::functors::tracer_functor;
+use crate::functors::wgsl::{f32_literal, vector_module, TwinParts};
 use crate::shading::encode_srgb_in_place;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{CallContext, Column, ColumnView, ElemType, Functor, FunctorError, Signature};
 use glam::Vec3;
+use std::sync::Arc;
 
-pub struct AntiAlias {
-    signature: Signature,
+pub fn functor() -> Arc<dyn Functor> {
+    let signature = Signature::group("antiAlias")
+        .input("color", ElemType::Vec3)
+        .output("pixel", ElemType::Vec3)
+        .doc("mean of each group of k linear colours (group: spp, 1 allowed), clamped to [0, 1] and sRGB-encoded for display");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl AntiAlias {
-    #[allow(clippy::new_without_default)]
-    pub fn new() -> AntiAlias {
-        AntiAlias {
-            signature: Signature::group("antiAlias")
-                .input("color", ElemType::Vec3)
-                .output("pixel", ElemType::Vec3)
-                .doc("mean of each group of k linear colours (group: spp, 1 allowed), clamped to [0, 1] and sRGB-encoded for display"),
-        }
-    }
+/// `twin.wgsl`: the mean, clamped and sRGB-encoded with the CPU's constants.
+fn twin_parts(_: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    Ok(TwinParts {
+        constants: vec![
+            ("SRGB_LINEAR_LIMIT", f32_literal(0.003_130_8)),
+            ("SRGB_EXPONENT", f32_literal(1.0 / 2.4)),
+        ],
+        modules: vec![vector_module()],
+        failures: vec!["antiAlias: group must be at least 1".into()],
+        ..TwinParts::default()
+    })
 }
 
-impl Functor for AntiAlias {
-    fn signature(&self) -> &Signature {
-        &self.signature
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let samples = ctx.group;
+    if samples == 0 {
+        return Err(FunctorError::bad_input(
+            "antiAlias: group must be at least 1",
+        ));
     }
-
-    /// `twin.wgsl`: the mean, clamped and sRGB-encoded with the CPU's constants.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let parts = TwinParts {
-            constants: vec![
-                ("SRGB_LINEAR_LIMIT", f32_literal(0.003_130_8)),
-                ("SRGB_EXPONENT", f32_literal(1.0 / 2.4)),
-            ],
-            modules: vec![vector_module()],
-            failures: vec!["antiAlias: group must be at least 1".into()],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
+    let colors = inputs[0].as_vec3();
+    let scale = 1.0 / samples as f32;
+    let out = outputs[0].as_vec3_mut();
+    let first = out.len();
+    // `max` first: it maps NaN to 0.
+    let clamp = |mean: Vec3| mean.max(Vec3::ZERO).min(Vec3::ONE);
+    if samples == 1 {
+        // The sum of one sample, as `Sum` folds it (from zero).
+        out.extend(colors.iter().map(|&c| clamp((Vec3::ZERO + c) * scale)));
+    } else {
+        out.extend(
+            colors
+                .chunks_exact(samples)
+                .map(|group| clamp(group.iter().copied().sum::<Vec3>() * scale)),
+        );
     }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let samples = ctx.group;
-        if samples == 0 {
-            return Err(FunctorError::bad_input(
-                "antiAlias: group must be at least 1",
-            ));
-        }
-        let colors = inputs[0].as_vec3();
-        let scale = 1.0 / samples as f32;
-        let out = outputs[0].as_vec3_mut();
-        let first = out.len();
-        // `max` first: it maps NaN to 0.
-        let clamp = |mean: Vec3| mean.max(Vec3::ZERO).min(Vec3::ONE);
-        if samples == 1 {
-            // The sum of one sample, as `Sum` folds it (from zero).
-            out.extend(colors.iter().map(|&c| clamp((Vec3::ZERO + c) * scale)));
-        } else {
-            out.extend(
-                colors
-                    .chunks_exact(samples)
-                    .map(|group| clamp(group.iter().copied().sum::<Vec3>() * scale)),
-            );
-        }
-        // The means' components in one run, for the SIMD encoder.
-        encode_srgb_in_place(bytemuck::cast_slice_mut(&mut out[first..]));
-        Ok(())
-    }
+    // The means' components in one run, for the SIMD encoder.
+    encode_srgb_in_place(bytemuck::cast_slice_mut(&mut out[first..]));
+    Ok(())
 }
 
 #[cfg(test)]

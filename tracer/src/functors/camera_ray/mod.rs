@@ -6,136 +6,119 @@
 //! Camera rays have weight 1 and depth 0.
 
 use crate::camera::{check_samples_per_pixel, sample_offset, Camera};
-use crate::functors::wgsl::{request_resources, twin, vector_module, TwinParts};
+use crate::functors::tracer_functor;
+use crate::functors::wgsl::{request_resources, vector_module, TwinParts};
 use crate::functors::{RayRecord, RayWriter};
 use crate::scene::TraceResources;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, HostValue,
     RecordId, Signature,
 };
 use glam::Vec3;
+use std::sync::Arc;
 
-pub struct CameraRay {
-    signature: Signature,
+pub fn functor(ray: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("cameraRay")
+        .input("index", ElemType::U32)
+        .output("ray", ElemType::Record(ray))
+        .named(
+            "spp",
+            HostType::Int,
+            Some(HostValue::Int(1)),
+            "samples per pixel: 1 (pixel centre) or 4 (2x2 grid)",
+        )
+        .doc("primary ray `index` of the camera (pixels in Morton order, spp samples each)");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl CameraRay {
-    pub fn new(ray: RecordId) -> CameraRay {
-        CameraRay {
-            signature: Signature::map("cameraRay")
-                .input("index", ElemType::U32)
-                .output("ray", ElemType::Record(ray))
-                .named(
-                    "spp",
-                    HostType::Int,
-                    Some(HostValue::Int(1)),
-                    "samples per pixel: 1 (pixel centre) or 4 (2x2 grid)",
-                )
-                .doc(
-                    "primary ray `index` of the camera (pixels in Morton order, spp samples each)",
-                ),
-        }
-    }
+/// `twin.wgsl`, reading the camera frame and Morton order built once per camera.
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let camera = request_resources::<TraceResources>(request, "cameraRay")?.camera_gpu_buffers();
+    Ok(TwinParts {
+        modules: vec![vector_module()],
+        buffers: vec![camera.camera, camera.morton_pixels],
+        failures: vec![
+            "cameraRay: spp must be 1 or 4 (the sample patterns of the camera)".into(),
+            "cameraRay: a ray index is out of range for the camera's pixels x spp samples".into(),
+        ],
+        ..TwinParts::default()
+    })
 }
 
-impl Functor for CameraRay {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    /// `twin.wgsl`, reading the camera frame and Morton order built once per camera.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let camera =
-            request_resources::<TraceResources>(request, "cameraRay")?.camera_gpu_buffers();
-        let parts = TwinParts {
-            modules: vec![vector_module()],
-            buffers: vec![camera.camera, camera.morton_pixels],
-            failures: vec![
-                "cameraRay: spp must be 1 or 4 (the sample patterns of the camera)".into(),
-                "cameraRay: a ray index is out of range for the camera's pixels x spp samples"
-                    .into(),
-            ],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let spp_value = ctx.named(0);
-        let spp = spp_value
-            .as_u32()
-            .filter(|&spp| check_samples_per_pixel(spp).is_ok())
-            .ok_or_else(|| {
-                FunctorError::bad_input(format!(
-                    "cameraRay: spp must be 1 or 4 (the sample patterns of the camera), got {spp_value}"
-                ))
-            })?;
-        let setup = &ctx.resources::<TraceResources>()?.camera;
-        let camera = &setup.camera;
-        let morton = setup.morton_pixels.as_slice();
-        let indices = inputs[0].as_u32();
-        // Ray `index` is valid while `index / spp < morton.len()`. One check of
-        // the chunk's largest index up front keeps the loop free of errors.
-        let limit = morton.len() as u64 * u64::from(spp);
-        if indices
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let spp_value = ctx.named(0);
+    let spp = spp_value
+        .as_u32()
+        .filter(|&spp| check_samples_per_pixel(spp).is_ok())
+        .ok_or_else(|| {
+            FunctorError::bad_input(format!(
+                "cameraRay: spp must be 1 or 4 (the sample patterns of the camera), got {spp_value}"
+            ))
+        })?;
+    let setup = &ctx.resources::<TraceResources>()?.camera;
+    let camera = &setup.camera;
+    let morton = setup.morton_pixels.as_slice();
+    let indices = inputs[0].as_u32();
+    // Ray `index` is valid while `index / spp < morton.len()`. One check of
+    // the chunk's largest index up front keeps the loop free of errors.
+    let limit = morton.len() as u64 * u64::from(spp);
+    if indices
+        .iter()
+        .max()
+        .is_some_and(|&max| u64::from(max) >= limit)
+    {
+        let index = indices
             .iter()
-            .max()
-            .is_some_and(|&max| u64::from(max) >= limit)
-        {
-            let index = indices
-                .iter()
-                .find(|&&index| u64::from(index) >= limit)
-                .expect("the largest index is out of range");
-            return Err(FunctorError::bad_input(format!(
-                "cameraRay: ray index {index} is out of range for {} pixels x {spp} samples",
-                morton.len()
-            )));
-        }
-        // spp is 1 or 4: a shift and a mask split an index into pixel and sample.
-        let shift = spp.trailing_zeros();
-        let mask = spp - 1;
-        let mut offsets = [(0.0, 0.0); 4];
-        for (sample, offset) in offsets.iter_mut().enumerate().take(spp as usize) {
-            *offset = sample_offset(spp, sample as u32);
-        }
-        let by_width = Divisor::new(camera.width);
-        let pixel_and_offset = |index: u32| {
-            let pixel = morton[(index >> shift) as usize];
-            let (sx, sy) = offsets[(index & mask) as usize];
-            let y = by_width.divide(pixel);
-            (pixel - y * camera.width, y, sx, sy)
-        };
-        let mut block = Directions::new();
-        let mut rays = RayWriter::new(&mut outputs[0], indices.len())?;
-        rays.extend_with(indices.len(), |i| {
-            let lane = i % LANES;
-            if lane == 0 {
-                block.compute(
-                    camera,
-                    &indices[i..indices.len().min(i + LANES)],
-                    pixel_and_offset,
-                );
-            }
-            let index = indices[i];
-            let pixel = morton[(index >> shift) as usize];
-            RayRecord {
-                origin: camera.eye,
-                dir: block.get(lane),
-                tmax: f32::INFINITY,
-                // Below 2^30: the camera caps pixels at 2^28 and spp at 4.
-                sample: (pixel << shift) | (index & mask),
-                weight: Vec3::ONE,
-                depth: 0,
-            }
-        });
-        Ok(())
+            .find(|&&index| u64::from(index) >= limit)
+            .expect("the largest index is out of range");
+        return Err(FunctorError::bad_input(format!(
+            "cameraRay: ray index {index} is out of range for {} pixels x {spp} samples",
+            morton.len()
+        )));
     }
+    // spp is 1 or 4: a shift and a mask split an index into pixel and sample.
+    let shift = spp.trailing_zeros();
+    let mask = spp - 1;
+    let mut offsets = [(0.0, 0.0); 4];
+    for (sample, offset) in offsets.iter_mut().enumerate().take(spp as usize) {
+        *offset = sample_offset(spp, sample as u32);
+    }
+    let by_width = Divisor::new(camera.width);
+    let pixel_and_offset = |index: u32| {
+        let pixel = morton[(index >> shift) as usize];
+        let (sx, sy) = offsets[(index & mask) as usize];
+        let y = by_width.divide(pixel);
+        (pixel - y * camera.width, y, sx, sy)
+    };
+    let mut block = Directions::new();
+    let mut rays = RayWriter::new(&mut outputs[0], indices.len())?;
+    rays.extend_with(indices.len(), |i| {
+        let lane = i % LANES;
+        if lane == 0 {
+            block.compute(
+                camera,
+                &indices[i..indices.len().min(i + LANES)],
+                pixel_and_offset,
+            );
+        }
+        let index = indices[i];
+        let pixel = morton[(index >> shift) as usize];
+        RayRecord {
+            origin: camera.eye,
+            dir: block.get(lane),
+            tmax: f32::INFINITY,
+            // Below 2^30: the camera caps pixels at 2^28 and spp at 4.
+            sample: (pixel << shift) | (index & mask),
+            weight: Vec3::ONE,
+            depth: 0,
+        }
+    });
+    Ok(())
 }
 
 /// Rays whose directions are computed together: the lanes of a block run the

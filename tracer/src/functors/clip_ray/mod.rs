@@ -5,62 +5,37 @@
 //! `pipelines/volume_surface.dpp` stops each ray's march through the volume
 //! at the surface it hit (`clipRay(rays, hits.t)`: a miss's `t` is +inf).
 
-use crate::functors::wgsl::{twin, TwinParts};
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use crate::functors::wgsl::no_parts;
+use crate::functors::{tracer_functor, with_field_replaced, RAY_TMAX_FIELD};
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
+use std::sync::Arc;
 
-/// `tmax`'s place among `Ray`'s fields (`functors::register_records`).
-const TMAX_FIELD: usize = 2;
-
-pub struct ClipRay {
-    signature: Signature,
+pub fn functor(ray: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("clipRay")
+        .input("ray", ElemType::Record(ray))
+        .input("t", ElemType::F32)
+        .output("ray", ElemType::Record(ray))
+        .doc("the ray ending at t where t is nearer than its tmax, every other field kept");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), no_parts)
 }
 
-impl ClipRay {
-    pub fn new(ray: RecordId) -> ClipRay {
-        ClipRay {
-            signature: Signature::map("clipRay")
-                .input("ray", ElemType::Record(ray))
-                .input("t", ElemType::F32)
-                .output("ray", ElemType::Record(ray))
-                .doc("the ray ending at t where t is nearer than its tmax, every other field kept"),
-        }
-    }
-}
-
-impl Functor for ClipRay {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        twin(
-            &self.signature,
-            request,
-            include_str!("twin.wgsl"),
-            TwinParts::default(),
+fn run_cpu(
+    _: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let ends = inputs[1].as_f32();
+    outputs[0] = with_field_replaced(&inputs[0], RAY_TMAX_FIELD, |tmax| {
+        let clipped = tmax.as_f32().iter().zip(ends);
+        Column::F32(
+            clipped
+                .map(|(&tmax, &t)| if t < tmax { t } else { tmax })
+                .collect(),
         )
-    }
-
-    fn run_cpu(
-        &self,
-        _: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let mut rays = inputs[0].to_column();
-        let ends = inputs[1].as_f32();
-        let tmax = rays.field_mut(TMAX_FIELD).as_f32_mut();
-        for (tmax, &t) in tmax.iter_mut().zip(ends) {
-            if t < *tmax {
-                *tmax = t;
-            }
-        }
-        outputs[0] = rays;
-        Ok(())
-    }
+    });
+    Ok(())
 }
 
 #[cfg(test)]
@@ -81,7 +56,7 @@ mod tests {
         let out = fixture
             .run("clipRay", &[], 0, &[rays.view(), ends.view()])
             .unwrap();
-        let tmax = out[0].field(super::TMAX_FIELD).unwrap();
+        let tmax = out[0].field(crate::functors::RAY_TMAX_FIELD).unwrap();
         assert_eq!(tmax.view().as_f32(), &[1.5, 2.0, f32::INFINITY]);
         for field in [0, 1, 3, 4, 5] {
             assert_eq!(out[0].field(field), rays.field(field), "field {field}");

@@ -3,65 +3,45 @@
 //! clamped to its ends (NaN reads as `min`): the table lookup of the `shader`
 //! functor's `base`, computed as it computes it.
 
-use crate::functors::wgsl::{colormap_module, request_resources, twin, vector_module, TwinParts};
+use crate::functors::tracer_functor;
+use crate::functors::wgsl::{colormap_module, request_resources, vector_module, TwinParts};
 use crate::scene::TraceResources;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{CallContext, Column, ColumnView, ElemType, Functor, FunctorError, Signature};
+use std::sync::Arc;
 
-pub struct Colormap {
-    signature: Signature,
+pub fn functor() -> Arc<dyn Functor> {
+    let signature = Signature::map("colormap")
+        .input("scalar", ElemType::F32)
+        .output("rgb", ElemType::Vec3)
+        .doc("the scene's colour map (linear RGB) at the scalar over the scene's scalar range");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl Colormap {
-    pub fn new() -> Colormap {
-        Colormap {
-            signature: Signature::map("colormap")
-                .input("scalar", ElemType::F32)
-                .output("rgb", ElemType::Vec3)
-                .doc("the scene's colour map (linear RGB) at the scalar over the scene's scalar range"),
-        }
-    }
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let shading = request_resources::<TraceResources>(request, "colormap")?.shading_gpu_buffers();
+    Ok(TwinParts {
+        modules: vec![vector_module(), colormap_module(&shading)],
+        buffers: vec![shading.constants],
+        ..TwinParts::default()
+    })
 }
 
-impl Default for Colormap {
-    fn default() -> Self {
-        Colormap::new()
-    }
-}
-
-impl Functor for Colormap {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let shading =
-            request_resources::<TraceResources>(request, "colormap")?.shading_gpu_buffers();
-        let parts = TwinParts {
-            modules: vec![vector_module(), colormap_module(&shading)],
-            buffers: vec![shading.constants],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let shading = &ctx.resources::<TraceResources>()?.shading;
-        let colormap = shading.colormap();
-        let [low, high] = shading.scalar_range();
-        let inverse_range = 1.0 / (high - low);
-        *outputs[0].as_vec3_mut() = inputs[0]
-            .as_f32()
-            .iter()
-            .map(|&s| colormap.linear_at((s - low) * inverse_range))
-            .collect();
-        Ok(())
-    }
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let shading = &ctx.resources::<TraceResources>()?.shading;
+    let colormap = shading.colormap();
+    let [low, high] = shading.scalar_range();
+    let inverse_range = 1.0 / (high - low);
+    *outputs[0].as_vec3_mut() = inputs[0]
+        .as_f32()
+        .iter()
+        .map(|&s| colormap.linear_at((s - low) * inverse_range))
+        .collect();
+    Ok(())
 }
 
 #[cfg(test)]

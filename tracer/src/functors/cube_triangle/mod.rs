@@ -15,87 +15,74 @@ use crate::functors::isosurface::{
     case_index, cell_origin, corner_values, edge_vertex, level, run_volume, TriangleRecord,
     TriangleWriter,
 };
+use crate::functors::tracer_functor;
 use crate::functors::wgsl::{
-    marching_cubes_module, request_resources, twin, vector_module, volume_module, TwinParts,
+    marching_cubes_module, request_resources, vector_module, volume_module, TwinParts,
 };
 use crate::marching_cubes_tables::tables;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, RecordId, Signature,
 };
+use std::sync::Arc;
 
-pub struct CubeTriangle {
-    signature: Signature,
+pub fn functor(triangle: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("cubeTriangle")
+        .input("cell", ElemType::U32)
+        .input("lane", ElemType::U32)
+        .output("tri", ElemType::Record(triangle))
+        .named("level", HostType::Float, None, "the isovalue (the same as cubeCase's)")
+        .doc("triangle `lane` of a volume cell's marching-cubes surface at level: corners on the cell edges, gradient normals, interpolated scalars");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl CubeTriangle {
-    pub fn new(triangle: RecordId) -> CubeTriangle {
-        CubeTriangle {
-            signature: Signature::map("cubeTriangle")
-                .input("cell", ElemType::U32)
-                .input("lane", ElemType::U32)
-                .output("tri", ElemType::Record(triangle))
-                .named("level", HostType::Float, None, "the isovalue (the same as cubeCase's)")
-                .doc("triangle `lane` of a volume cell's marching-cubes surface at level: corners on the cell edges, gradient normals, interpolated scalars"),
-        }
-    }
+/// `twin.wgsl`, reading the volume (built once per volume) and the tables.
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let volume = request_resources::<VolumeResources>(request, "cubeTriangle")?
+        .gpu_buffers()
+        .map_err(|e| FunctorError::bad_input(format!("cubeTriangle: {e}")))?;
+    Ok(TwinParts {
+        modules: vec![
+            vector_module(),
+            volume_module(&volume),
+            marching_cubes_module(),
+        ],
+        failures: vec![
+            "cubeTriangle: level must be a finite number".into(),
+            "cubeTriangle: a cell index is past the volume's last cell".into(),
+            "cubeTriangle: a lane is past the cell's triangles at this level".into(),
+        ],
+        ..TwinParts::default()
+    })
 }
 
-impl Functor for CubeTriangle {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    /// `twin.wgsl`, reading the volume (built once per volume) and the tables.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let volume = request_resources::<VolumeResources>(request, "cubeTriangle")?
-            .gpu_buffers()
-            .map_err(|e| FunctorError::bad_input(format!("cubeTriangle: {e}")))?;
-        let parts = TwinParts {
-            modules: vec![
-                vector_module(),
-                volume_module(&volume),
-                marching_cubes_module(),
-            ],
-            failures: vec![
-                "cubeTriangle: level must be a finite number".into(),
-                "cubeTriangle: a cell index is past the volume's last cell".into(),
-                "cubeTriangle: a lane is past the cell's triangles at this level".into(),
-            ],
-            ..TwinParts::default()
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let volume = run_volume(ctx, "cubeTriangle")?;
+    let level = level(ctx, "cubeTriangle")?;
+    let tables = tables();
+    let (cells, lanes) = (inputs[0].as_u32(), inputs[1].as_u32());
+    let mut out = TriangleWriter::new(&mut outputs[0], cells.len())?;
+    for (&cell, &lane) in cells.iter().zip(lanes) {
+        let origin = cell_origin(volume, cell, "cubeTriangle")?;
+        let values = corner_values(volume, origin);
+        let case = case_index(&values, level);
+        let triangles = tables.case_triangles(case);
+        let Some(edges) = triangles.get(lane as usize) else {
+            return Err(FunctorError::bad_input(format!(
+                "cubeTriangle: cell {cell} has {} triangles at level {level}, no triangle {lane}",
+                triangles.len()
+            )));
         };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
+        let vertices = edges.map(|edge| edge_vertex(volume, origin, &values, edge, level));
+        out.push(TriangleRecord {
+            corners: vertices.map(|v| v.0),
+            normals: vertices.map(|v| v.1),
+            scalars: vertices.map(|v| v.2),
+        });
     }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let volume = run_volume(ctx, "cubeTriangle")?;
-        let level = level(ctx, "cubeTriangle")?;
-        let tables = tables();
-        let (cells, lanes) = (inputs[0].as_u32(), inputs[1].as_u32());
-        let mut out = TriangleWriter::new(&mut outputs[0], cells.len())?;
-        for (&cell, &lane) in cells.iter().zip(lanes) {
-            let origin = cell_origin(volume, cell, "cubeTriangle")?;
-            let values = corner_values(volume, origin);
-            let case = case_index(&values, level);
-            let triangles = tables.case_triangles(case);
-            let Some(edges) = triangles.get(lane as usize) else {
-                return Err(FunctorError::bad_input(format!(
-                    "cubeTriangle: cell {cell} has {} triangles at level {level}, no triangle {lane}",
-                    triangles.len()
-                )));
-            };
-            let vertices = edges.map(|edge| edge_vertex(volume, origin, &values, edge, level));
-            out.push(TriangleRecord {
-                corners: vertices.map(|v| v.0),
-                normals: vertices.map(|v| v.1),
-                scalars: vertices.map(|v| v.2),
-            });
-        }
-        Ok(())
-    }
+    Ok(())
 }

@@ -10,71 +10,52 @@
 //! `id` is `prim` itself. A miss, `prim = 4294967295` ([`MISS_PRIM`]), stays
 //! 4294967295. With a table, a `prim` past the scene's triangles is an error.
 
-use crate::functors::wgsl::{request_resources, twin, TwinParts};
+use crate::functors::tracer_functor;
+use crate::functors::wgsl::{request_resources, TwinParts};
 use crate::functors::MISS_PRIM;
 use crate::scene::TraceResources;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{CallContext, Column, ColumnView, ElemType, Functor, FunctorError, Signature};
+use std::sync::Arc;
 
-pub struct GlobalId {
-    signature: Signature,
+pub fn functor() -> Arc<dyn Functor> {
+    let signature = Signature::map("globalId")
+        .input("prim", ElemType::U32)
+        .output("id", ElemType::U32)
+        .doc("the id of triangle prim in the whole data set: its entry in the scene's global id table, prim itself without one (a miss, 4294967295, stays a miss)");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl GlobalId {
-    pub fn new() -> GlobalId {
-        GlobalId {
-            signature: Signature::map("globalId")
-                .input("prim", ElemType::U32)
-                .output("id", ElemType::U32)
-                .doc("the id of triangle prim in the whole data set: its entry in the scene's global id table, prim itself without one (a miss, 4294967295, stays a miss)"),
-        }
-    }
+/// `twin.wgsl`, reading the scene's id table (built once per scene).
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let scene = &request_resources::<TraceResources>(request, "globalId")?.scene;
+    Ok(TwinParts {
+        constants: vec![("MISS_PRIM", format!("{MISS_PRIM}u"))],
+        buffers: vec![scene.global_id_gpu_buffer().clone()],
+        failures: vec!["globalId: a hit names a triangle the scene does not have".into()],
+        ..TwinParts::default()
+    })
 }
 
-impl Default for GlobalId {
-    fn default() -> Self {
-        GlobalId::new()
-    }
-}
-
-impl Functor for GlobalId {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    /// `twin.wgsl`, reading the scene's id table (built once per scene).
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let scene = &request_resources::<TraceResources>(request, "globalId")?.scene;
-        let parts = TwinParts {
-            constants: vec![("MISS_PRIM", format!("{MISS_PRIM}u"))],
-            buffers: vec![scene.global_id_gpu_buffer().clone()],
-            failures: vec!["globalId: a hit names a triangle the scene does not have".into()],
-            ..TwinParts::default()
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let scene = &ctx.resources::<TraceResources>()?.scene;
+    let prims = inputs[0].as_u32();
+    let out = outputs[0].as_u32_mut();
+    out.reserve(prims.len());
+    for &prim in prims {
+        let Some(id) = scene.global_id(prim) else {
+            return Err(FunctorError::bad_input(format!(
+                "globalId: hit names triangle {prim}, but the scene has {} triangles",
+                scene.mesh.triangles.len()
+            )));
         };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
+        out.push(id);
     }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let scene = &ctx.resources::<TraceResources>()?.scene;
-        let prims = inputs[0].as_u32();
-        let out = outputs[0].as_u32_mut();
-        out.reserve(prims.len());
-        for &prim in prims {
-            let Some(id) = scene.global_id(prim) else {
-                return Err(FunctorError::bad_input(format!(
-                    "globalId: hit names triangle {prim}, but the scene has {} triangles",
-                    scene.mesh.triangles.len()
-                )));
-            };
-            out.push(id);
-        }
-        Ok(())
-    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -5,63 +5,46 @@
 //! backend and traversal, whatever order they visit nodes in. Dead rays (`tmax
 //! <= 0`) miss without a traversal.
 
-use crate::functors::wgsl::{
-    bvh_module, request_resources, stack_overflow_failure, twin, vector_module, TwinParts,
-};
+use crate::functors::tracer_functor;
+use crate::functors::wgsl::{bvh_traversal_parts, request_resources, TwinParts};
 use crate::functors::MISS_PRIM;
 use crate::functors::{write_hits, RayColumns};
 use crate::scene::TraceResources;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
+use std::sync::Arc;
 
-pub struct Intersect {
-    signature: Signature,
+pub fn functor(ray: RecordId, hit: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("intersect")
+        .input("ray", ElemType::Record(ray))
+        .output("hit", ElemType::Record(hit))
+        .doc("closest hit of the ray with the scene (miss: t = inf, prim = 4294967295)");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl Intersect {
-    pub fn new(ray: RecordId, hit: RecordId) -> Intersect {
-        Intersect {
-            signature: Signature::map("intersect")
-                .input("ray", ElemType::Record(ray))
-                .output("hit", ElemType::Record(hit))
-                .doc("closest hit of the ray with the scene (miss: t = inf, prim = 4294967295)"),
-        }
-    }
+/// `twin.wgsl`: the CPU's traversal on the scene's BVH.
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let scene = &request_resources::<TraceResources>(request, "intersect")?.scene;
+    Ok(TwinParts {
+        constants: vec![("MISS_PRIM", format!("{MISS_PRIM}u"))],
+        ..bvh_traversal_parts(scene.gpu_buffers(), "intersect")
+    })
 }
 
-impl Functor for Intersect {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    /// `twin.wgsl`: the CPU's traversal on the scene's BVH, built once per scene.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let scene = &request_resources::<TraceResources>(request, "intersect")?.scene;
-        let parts = TwinParts {
-            constants: vec![("MISS_PRIM", format!("{MISS_PRIM}u"))],
-            modules: vec![vector_module(), bvh_module(scene.gpu_buffers())],
-            failures: vec![stack_overflow_failure("intersect")],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let bvh = &ctx.resources::<TraceResources>()?.scene.bvh;
-        let rays = RayColumns::new(&inputs[0]);
-        let len = rays.len();
-        // Dead rays (tmax <= 0) miss without a traversal.
-        write_hits(&mut outputs[0], len, |sink| {
-            bvh.intersect_closest_batch(len, |index| rays.get(index), |hit| sink.push(hit))
-        })
-    }
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let bvh = &ctx.resources::<TraceResources>()?.scene.bvh;
+    let rays = RayColumns::new(&inputs[0]);
+    let len = rays.len();
+    // Dead rays (tmax <= 0) miss without a traversal.
+    write_hits(&mut outputs[0], len, |sink| {
+        bvh.intersect_closest_batch(len, |index| rays.get(index), |hit| sink.push(hit))
+    })
 }
 
 #[cfg(test)]

@@ -21,9 +21,7 @@
 
 use crate::functors::{write_hits, RayColumns};
 use crate::mesh::{MeshError, TriangleMesh};
-use dpp_runtime::{
-    CallContext, Column, ColumnView, Functor, FunctorError, FunctorLibrary, Signature,
-};
+use dpp_runtime::{ClosureFunctor, Column, ColumnView, Functor, FunctorError, FunctorLibrary};
 use embree3::{
     BufferUsage, Device, Format, GeometryKind, Hit16, IntersectContext, Ray, Ray16, RayHit,
     RayHit16, Scene, SceneFlags, SoAHit, SoARay, ValidMask, ValidMaskN, INVALID_ID,
@@ -127,24 +125,6 @@ impl EmbreeScene {
     }
 }
 
-/// `intersect` through Embree; see the module documentation.
-pub struct EmbreeIntersect {
-    signature: Signature,
-    scene: Arc<EmbreeScene>,
-    mode: EmbreeMode,
-}
-
-impl EmbreeIntersect {
-    /// `signature` is the CPU `intersect`'s, so pipelines type-check the same.
-    pub fn new(signature: Signature, scene: Arc<EmbreeScene>, mode: EmbreeMode) -> EmbreeIntersect {
-        EmbreeIntersect {
-            signature,
-            scene,
-            mode,
-        }
-    }
-}
-
 /// Embree's ray for one of ours (`tnear` 0, `tfar` our `tmax`).
 #[inline]
 fn embree_ray(rays: &RayColumns<'_>, index: usize) -> Ray {
@@ -188,112 +168,94 @@ fn load_packet(
     valid
 }
 
-impl Functor for EmbreeIntersect {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    fn run_cpu(
-        &self,
-        _ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let rays = RayColumns::new(&inputs[0]);
-        let n = rays.len();
-        let scene = &self.scene.scene;
-        let mut context = IntersectContext::coherent();
-        write_hits(&mut outputs[0], n, |sink| match self.mode {
-            EmbreeMode::Single => {
-                for index in 0..n {
-                    let hit = if rays.tmax[index] > 0.0 {
-                        let mut ray_hit = RayHit::from_ray(embree_ray(&rays, index));
-                        scene.intersect(&mut context, &mut ray_hit);
-                        (ray_hit.hit.geomID != INVALID_ID).then_some(crate::bvh::HitRecord {
-                            t: ray_hit.ray.tfar,
-                            prim: ray_hit.hit.primID,
-                            u: ray_hit.hit.u,
-                            v: ray_hit.hit.v,
-                        })
-                    } else {
-                        None
-                    };
+/// `intersect` through Embree; see the module documentation.
+fn intersect(
+    scene: &EmbreeScene,
+    mode: EmbreeMode,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let rays = RayColumns::new(&inputs[0]);
+    let n = rays.len();
+    let scene = &scene.scene;
+    let mut context = IntersectContext::coherent();
+    write_hits(&mut outputs[0], n, |sink| match mode {
+        EmbreeMode::Single => {
+            for index in 0..n {
+                let hit = if rays.tmax[index] > 0.0 {
+                    let mut ray_hit = RayHit::from_ray(embree_ray(&rays, index));
+                    scene.intersect(&mut context, &mut ray_hit);
+                    (ray_hit.hit.geomID != INVALID_ID).then_some(crate::bvh::HitRecord {
+                        t: ray_hit.ray.tfar,
+                        prim: ray_hit.hit.primID,
+                        u: ray_hit.hit.u,
+                        v: ray_hit.hit.v,
+                    })
+                } else {
+                    None
+                };
+                sink.push(hit);
+            }
+        }
+        EmbreeMode::Packet16 => {
+            let mut packet = RayHit16 {
+                ray: Ray16::empty(),
+                hit: Hit16::new(),
+            };
+            for (start, lanes) in packets(n) {
+                packet.hit.geomID = [INVALID_ID; 16];
+                packet.hit.primID = [INVALID_ID; 16];
+                let valid = load_packet(&mut packet.ray, &rays, start, lanes);
+                scene.intersect16(&mut context, &mut packet, &valid);
+                for lane in 0..lanes {
+                    let hit =
+                        (packet.hit.geomID[lane] != INVALID_ID).then(|| crate::bvh::HitRecord {
+                            t: packet.ray.tfar(lane),
+                            prim: packet.hit.primID[lane],
+                            u: packet.hit.u(lane),
+                            v: packet.hit.v(lane),
+                        });
                     sink.push(hit);
                 }
             }
-            EmbreeMode::Packet16 => {
-                let mut packet = RayHit16 {
-                    ray: Ray16::empty(),
-                    hit: Hit16::new(),
-                };
-                for (start, lanes) in packets(n) {
-                    packet.hit.geomID = [INVALID_ID; 16];
-                    packet.hit.primID = [INVALID_ID; 16];
-                    let valid = load_packet(&mut packet.ray, &rays, start, lanes);
-                    scene.intersect16(&mut context, &mut packet, &valid);
-                    for lane in 0..lanes {
-                        let hit = (packet.hit.geomID[lane] != INVALID_ID).then(|| {
-                            crate::bvh::HitRecord {
-                                t: packet.ray.tfar(lane),
-                                prim: packet.hit.primID[lane],
-                                u: packet.hit.u(lane),
-                                v: packet.hit.v(lane),
-                            }
-                        });
-                        sink.push(hit);
-                    }
-                }
-            }
-        })
-    }
+        }
+    })
 }
 
 /// `occluded` through Embree; see the module documentation.
-pub struct EmbreeOccluded {
-    signature: Signature,
-    scene: Arc<EmbreeScene>,
+fn occluded(
+    scene: &EmbreeScene,
     mode: EmbreeMode,
-}
-
-impl Functor for EmbreeOccluded {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    fn run_cpu(
-        &self,
-        _ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let rays = RayColumns::new(&inputs[0]);
-        let n = rays.len();
-        let blocked = outputs[0].as_bool_mut();
-        blocked.reserve(n);
-        let scene = &self.scene.scene;
-        // Shadow and occlusion rays leave from many points: not coherent.
-        let mut context = IntersectContext::incoherent();
-        match self.mode {
-            EmbreeMode::Single => {
-                for index in 0..n {
-                    blocked.push(
-                        rays.tmax[index] > 0.0
-                            && scene.occluded(&mut context, &mut embree_ray(&rays, index)),
-                    );
-                }
-            }
-            EmbreeMode::Packet16 => {
-                let mut packet = Ray16::empty();
-                for (start, lanes) in packets(n) {
-                    let valid = load_packet(&mut packet, &rays, start, lanes);
-                    scene.occluded16(&mut context, &mut packet, &valid);
-                    // Embree marks a blocked ray by setting its `tfar` to -inf.
-                    blocked.extend((0..lanes).map(|lane| packet.tfar(lane) == f32::NEG_INFINITY));
-                }
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let rays = RayColumns::new(&inputs[0]);
+    let n = rays.len();
+    let blocked = outputs[0].as_bool_mut();
+    blocked.reserve(n);
+    let scene = &scene.scene;
+    // Shadow and occlusion rays leave from many points: not coherent.
+    let mut context = IntersectContext::incoherent();
+    match mode {
+        EmbreeMode::Single => {
+            for index in 0..n {
+                blocked.push(
+                    rays.tmax[index] > 0.0
+                        && scene.occluded(&mut context, &mut embree_ray(&rays, index)),
+                );
             }
         }
-        Ok(())
+        EmbreeMode::Packet16 => {
+            let mut packet = Ray16::empty();
+            for (start, lanes) in packets(n) {
+                let valid = load_packet(&mut packet, &rays, start, lanes);
+                scene.occluded16(&mut context, &mut packet, &valid);
+                // Embree marks a blocked ray by setting its `tfar` to -inf.
+                blocked.extend((0..lanes).map(|lane| packet.tfar(lane) == f32::NEG_INFINITY));
+            }
+        }
     }
+    Ok(())
 }
 
 /// A copy of `library` in which `intersect` and `occluded` are answered by
@@ -311,16 +273,15 @@ pub fn library_with_embree(
                 FunctorError::bad_input(format!("the library has no `{name}` functor to replace"))
             })
     };
-    let intersect: Arc<dyn Functor> = Arc::new(EmbreeIntersect::new(
-        signature("intersect")?,
-        scene.clone(),
-        mode,
+    // `signature` is the CPU functor's, so that pipelines type-check the same.
+    let intersect: Arc<dyn Functor> = Arc::new(ClosureFunctor::new(signature("intersect")?, {
+        let scene = scene.clone();
+        move |_, inputs, outputs| intersect(&scene, mode, inputs, outputs)
+    }));
+    let occluded: Arc<dyn Functor> = Arc::new(ClosureFunctor::new(
+        signature("occluded")?,
+        move |_, inputs, outputs| occluded(&scene, mode, inputs, outputs),
     ));
-    let occluded: Arc<dyn Functor> = Arc::new(EmbreeOccluded {
-        signature: signature("occluded")?,
-        scene,
-        mode,
-    });
     let mut swapped = FunctorLibrary::default();
     swapped.records = library.records.clone();
     swapped.uniforms = library.uniforms.clone();
@@ -339,7 +300,7 @@ mod tests {
     use super::*;
     use crate::functors::test_support::{probe_rays, read_rays, Fixture};
     use crate::functors::MISS_PRIM;
-    use dpp_runtime::ElemType;
+    use dpp_runtime::{CallContext, ElemType};
 
     /// Runs functor `name` of `library` on `rays` in the fixture's context;
     /// its output, of type `output`.

@@ -7,64 +7,51 @@
 //! fan-out `shader` does inside one functor).
 
 use crate::functors::record_fields_mut;
-use crate::functors::wgsl::{request_resources, twin, TwinParts};
+use crate::functors::tracer_functor;
+use crate::functors::wgsl::{request_resources, TwinParts};
 use crate::scene::TraceResources;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
+use std::sync::Arc;
 
-pub struct LightFunctor {
-    signature: Signature,
+pub fn functor(light: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("light")
+        .input("index", ElemType::U32)
+        .output("l", ElemType::Record(light))
+        .doc("point light index of the scene (below scene.lights): position, intensity, colour");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl LightFunctor {
-    pub fn new(light: RecordId) -> LightFunctor {
-        LightFunctor {
-            signature: Signature::map("light")
-                .input("index", ElemType::U32)
-                .output("l", ElemType::Record(light))
-                .doc("point light index of the scene (below scene.lights): position, intensity, colour"),
-        }
-    }
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let shading = request_resources::<TraceResources>(request, "light")?.shading_gpu_buffers();
+    Ok(TwinParts {
+        buffers: vec![shading.lights],
+        failures: vec!["light: an index past the scene's lights".into()],
+        ..TwinParts::default()
+    })
 }
 
-impl Functor for LightFunctor {
-    fn signature(&self) -> &Signature {
-        &self.signature
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let lights = ctx.resources::<TraceResources>()?.shading.lights();
+    let indices = inputs[0].as_u32();
+    if let Some(&index) = indices.iter().find(|&&i| i as usize >= lights.len()) {
+        return Err(FunctorError::bad_input(format!(
+            "light: index {index}, but the scene has {} lights",
+            lights.len()
+        )));
     }
-
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let shading = request_resources::<TraceResources>(request, "light")?.shading_gpu_buffers();
-        let parts = TwinParts {
-            buffers: vec![shading.lights],
-            failures: vec!["light: an index past the scene's lights".into()],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let lights = ctx.resources::<TraceResources>()?.shading.lights();
-        let indices = inputs[0].as_u32();
-        if let Some(&index) = indices.iter().find(|&&i| i as usize >= lights.len()) {
-            return Err(FunctorError::bad_input(format!(
-                "light: index {index}, but the scene has {} lights",
-                lights.len()
-            )));
-        }
-        let picked = || indices.iter().map(|&i| &lights[i as usize]);
-        let [position, intensity, color] = record_fields_mut(&mut outputs[0])?;
-        *position = Column::Vec3(picked().map(|l| l.position).collect());
-        *intensity = Column::F32(picked().map(|l| l.intensity).collect());
-        *color = Column::Vec3(picked().map(|l| l.color).collect());
-        Ok(())
-    }
+    let picked = || indices.iter().map(|&i| &lights[i as usize]);
+    let [position, intensity, color] = record_fields_mut(&mut outputs[0])?;
+    *position = Column::Vec3(picked().map(|l| l.position).collect());
+    *intensity = Column::F32(picked().map(|l| l.intensity).collect());
+    *color = Column::Vec3(picked().map(|l| l.color).collect());
+    Ok(())
 }
 
 #[cfg(test)]

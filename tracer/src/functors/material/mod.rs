@@ -6,66 +6,52 @@
 //! itself instead of calling `shader` (`pipelines/workload2_expressions.dpp`).
 
 use crate::functors::record_fields_mut;
-use crate::functors::wgsl::{request_resources, twin, TwinParts};
+use crate::functors::tracer_functor;
+use crate::functors::wgsl::{request_resources, TwinParts};
 use crate::scene::TraceResources;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
+use std::sync::Arc;
 
-pub struct MaterialFunctor {
-    signature: Signature,
+pub fn functor(material: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("material")
+        .input("id", ElemType::U32)
+        .output("m", ElemType::Record(material))
+        .doc("material id of the scene: diffuse (Kd), shininess (Ns), specular (Ks), reflectivity");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl MaterialFunctor {
-    pub fn new(material: RecordId) -> MaterialFunctor {
-        MaterialFunctor {
-            signature: Signature::map("material")
-                .input("id", ElemType::U32)
-                .output("m", ElemType::Record(material))
-                .doc("material id of the scene: diffuse (Kd), shininess (Ns), specular (Ks), reflectivity"),
-        }
-    }
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let shading = request_resources::<TraceResources>(request, "material")?.shading_gpu_buffers();
+    Ok(TwinParts {
+        buffers: vec![shading.materials],
+        failures: vec!["material: an id names a material the scene does not have".into()],
+        ..TwinParts::default()
+    })
 }
 
-impl Functor for MaterialFunctor {
-    fn signature(&self) -> &Signature {
-        &self.signature
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let materials = ctx.resources::<TraceResources>()?.shading.materials();
+    let ids = inputs[0].as_u32();
+    if let Some(&id) = ids.iter().find(|&&id| id as usize >= materials.len()) {
+        return Err(FunctorError::bad_input(format!(
+            "material: id {id}, but the scene has {} materials",
+            materials.len()
+        )));
     }
-
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let shading =
-            request_resources::<TraceResources>(request, "material")?.shading_gpu_buffers();
-        let parts = TwinParts {
-            buffers: vec![shading.materials],
-            failures: vec!["material: an id names a material the scene does not have".into()],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let materials = ctx.resources::<TraceResources>()?.shading.materials();
-        let ids = inputs[0].as_u32();
-        if let Some(&id) = ids.iter().find(|&&id| id as usize >= materials.len()) {
-            return Err(FunctorError::bad_input(format!(
-                "material: id {id}, but the scene has {} materials",
-                materials.len()
-            )));
-        }
-        let picked = || ids.iter().map(|&id| &materials[id as usize]);
-        let [diffuse, shininess, specular, reflectivity] = record_fields_mut(&mut outputs[0])?;
-        *diffuse = Column::Vec3(picked().map(|m| m.kd).collect());
-        *shininess = Column::F32(picked().map(|m| m.ns).collect());
-        *specular = Column::Vec3(picked().map(|m| m.ks).collect());
-        *reflectivity = Column::F32(picked().map(|m| m.reflectivity).collect());
-        Ok(())
-    }
+    let picked = || ids.iter().map(|&id| &materials[id as usize]);
+    let [diffuse, shininess, specular, reflectivity] = record_fields_mut(&mut outputs[0])?;
+    *diffuse = Column::Vec3(picked().map(|m| m.kd).collect());
+    *shininess = Column::F32(picked().map(|m| m.ns).collect());
+    *specular = Column::Vec3(picked().map(|m| m.ks).collect());
+    *reflectivity = Column::F32(picked().map(|m| m.reflectivity).collect());
+    Ok(())
 }
 
 #[cfg(test)]

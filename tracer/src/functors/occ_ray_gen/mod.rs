@@ -13,101 +13,87 @@
 //! of chunking and thread count. Non-hit surfaces (and `range <= 0`) give dead
 //! rays, which `occluded` reports as not blocked.
 
+use crate::functors::tracer_functor;
 use crate::functors::wgsl::{
-    diagonal_failure, random_module, sampling_module, surface_module, twin, vector_module,
-    TwinParts,
+    diagonal_failure, random_module, sampling_module, surface_module, vector_module, TwinParts,
 };
 use crate::functors::{
     named_f32, scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON,
 };
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, HostValue,
     RecordId, Signature,
 };
 use glam::Vec3;
 use std::f32::consts::TAU;
+use std::sync::Arc;
 
-pub struct OccRayGen {
-    signature: Signature,
+pub fn functor(surface: RecordId, ray: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::expand("occRayGen")
+        .input("surf", ElemType::Record(surface))
+        .output("ray", ElemType::Record(ray))
+        .named(
+            "range",
+            HostType::Float,
+            Some(HostValue::Float(0.05)),
+            "length of the occlusion rays as a fraction of the scene diagonal",
+        )
+        .doc("lane j: a cosine-weighted hemisphere ray about the normal, hashed from (sample, depth, j); dead for a miss");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl OccRayGen {
-    pub fn new(surface: RecordId, ray: RecordId) -> OccRayGen {
-        OccRayGen {
-            signature: Signature::expand("occRayGen")
-                .input("surf", ElemType::Record(surface))
-                .output("ray", ElemType::Record(ray))
-                .named(
-                    "range",
-                    HostType::Float,
-                    Some(HostValue::Float(0.05)),
-                    "length of the occlusion rays as a fraction of the scene diagonal",
-                )
-                .doc("lane j: a cosine-weighted hemisphere ray about the normal, hashed from (sample, depth, j); dead for a miss"),
-        }
-    }
+/// `twin.wgsl`: the same hashed random numbers and hemisphere mapping.
+fn twin_parts(_: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    Ok(TwinParts {
+        modules: vec![
+            vector_module(),
+            random_module(),
+            sampling_module(),
+            surface_module(),
+        ],
+        failures: vec![
+            "occRayGen: range must be a finite number".into(),
+            diagonal_failure("occRayGen"),
+        ],
+        ..TwinParts::default()
+    })
 }
 
-impl Functor for OccRayGen {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    /// `twin.wgsl`: the same hashed random numbers and hemisphere mapping.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let parts = TwinParts {
-            modules: vec![
-                vector_module(),
-                random_module(),
-                sampling_module(),
-                surface_module(),
-            ],
-            failures: vec![
-                "occRayGen: range must be a finite number".into(),
-                diagonal_failure("occRayGen"),
-            ],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let range = named_f32(ctx, 0, "occRayGen", "range")?;
-        let diagonal = scene_diagonal(ctx, "occRayGen")?;
-        let lanes = u32::try_from(ctx.group).map_err(|_| {
-            FunctorError::bad_input(format!("occRayGen: fanout {} is too large", ctx.group))
-        })?;
-        let epsilon = SURFACE_EPSILON * diagonal;
-        let length = range * diagonal;
-        let reaches = length > 0.0;
-        let surfaces = SurfaceColumns::new(&inputs[0]);
-        let mut out = RayWriter::new(&mut outputs[0], surfaces.len() * ctx.group)?;
-        for index in 0..surfaces.len() {
-            let surface = surfaces.get(index);
-            for lane in 0..lanes {
-                if !surface.hit || !reaches {
-                    out.push(RayRecord::dead(surface.sample, surface.depth));
-                    continue;
-                }
-                let (u1, u2) = random_pair(surface.sample, surface.depth, lane);
-                out.push(RayRecord {
-                    origin: surface.offset_origin(epsilon),
-                    dir: surface.above_surface(cosine_hemisphere(surface.normal, u1, u2)),
-                    tmax: length,
-                    sample: surface.sample,
-                    weight: surface.weight,
-                    depth: surface.depth,
-                });
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let range = named_f32(ctx, 0, "occRayGen", "range")?;
+    let diagonal = scene_diagonal(ctx, "occRayGen")?;
+    let lanes = u32::try_from(ctx.group).map_err(|_| {
+        FunctorError::bad_input(format!("occRayGen: fanout {} is too large", ctx.group))
+    })?;
+    let epsilon = SURFACE_EPSILON * diagonal;
+    let length = range * diagonal;
+    let reaches = length > 0.0;
+    let surfaces = SurfaceColumns::new(&inputs[0]);
+    let mut out = RayWriter::new(&mut outputs[0], surfaces.len() * ctx.group)?;
+    for index in 0..surfaces.len() {
+        let surface = surfaces.get(index);
+        for lane in 0..lanes {
+            if !surface.hit || !reaches {
+                out.push(RayRecord::dead(surface.sample, surface.depth));
+                continue;
             }
+            let (u1, u2) = random_pair(surface.sample, surface.depth, lane);
+            out.push(RayRecord {
+                origin: surface.offset_origin(epsilon),
+                dir: surface.above_surface(cosine_hemisphere(surface.normal, u1, u2)),
+                tmax: length,
+                sample: surface.sample,
+                weight: surface.weight,
+                depth: surface.depth,
+            });
         }
-        Ok(())
     }
+    Ok(())
 }
 
 /// The PCG hash (Jarzynski and Olano, "Hash Functions for GPU Rendering", 2020).
@@ -150,21 +136,13 @@ pub(crate) fn cosine_hemisphere(normal: Vec3, u1: f32, u2: f32) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::functors::test_support::{read_rays, Fixture};
+    use crate::functors::test_support::{read_rays, surface_hit, Fixture};
     use crate::functors::SurfaceRecord;
 
     fn surface(normal: Vec3, sample: u32, depth: u32) -> SurfaceRecord {
         SurfaceRecord {
-            position: Vec3::new(0.5, 0.5, 0.0),
-            normal,
-            view: normal,
-            scalar: 0.0,
-            material: 0,
-            hit: true,
-            sample,
-            weight: Vec3::ONE,
             depth,
-            geometric: normal,
+            ..surface_hit(Vec3::new(0.5, 0.5, 0.0), normal, sample)
         }
     }
 

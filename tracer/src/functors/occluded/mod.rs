@@ -2,61 +2,42 @@
 //! `0 < t < ray.tmax` (any hit; traversal stops at the first one). Dead rays
 //! (`tmax <= 0`) are never blocked.
 
-use crate::functors::wgsl::{
-    bvh_module, request_resources, stack_overflow_failure, twin, vector_module, TwinParts,
-};
+use crate::functors::tracer_functor;
+use crate::functors::wgsl::{bvh_traversal_parts, request_resources, TwinParts};
 use crate::functors::RayColumns;
 use crate::scene::TraceResources;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
+use std::sync::Arc;
 
-pub struct Occluded {
-    signature: Signature,
+pub fn functor(ray: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("occluded")
+        .input("ray", ElemType::Record(ray))
+        .output("blocked", ElemType::Bool)
+        .doc("whether any triangle lies on the ray with 0 < t < tmax");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl Occluded {
-    pub fn new(ray: RecordId) -> Occluded {
-        Occluded {
-            signature: Signature::map("occluded")
-                .input("ray", ElemType::Record(ray))
-                .output("blocked", ElemType::Bool)
-                .doc("whether any triangle lies on the ray with 0 < t < tmax"),
-        }
-    }
+/// `twin.wgsl`: the CPU's any-hit traversal on the scene's BVH.
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let scene = &request_resources::<TraceResources>(request, "occluded")?.scene;
+    Ok(bvh_traversal_parts(scene.gpu_buffers(), "occluded"))
 }
 
-impl Functor for Occluded {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    /// `twin.wgsl`: the CPU's any-hit traversal on the scene's BVH, built once per scene.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let scene = &request_resources::<TraceResources>(request, "occluded")?.scene;
-        let parts = TwinParts {
-            modules: vec![vector_module(), bvh_module(scene.gpu_buffers())],
-            failures: vec![stack_overflow_failure("occluded")],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let bvh = &ctx.resources::<TraceResources>()?.scene.bvh;
-        let rays = RayColumns::new(&inputs[0]);
-        let blocked = outputs[0].as_bool_mut();
-        blocked.reserve(rays.len());
-        // Dead rays (tmax <= 0) are never blocked.
-        bvh.occluded_batch(rays.len(), |index| rays.get(index), |hit| blocked.push(hit));
-        Ok(())
-    }
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let bvh = &ctx.resources::<TraceResources>()?.scene.bvh;
+    let rays = RayColumns::new(&inputs[0]);
+    let blocked = outputs[0].as_bool_mut();
+    blocked.reserve(rays.len());
+    // Dead rays (tmax <= 0) are never blocked.
+    bvh.occluded_batch(rays.len(), |index| rays.get(index), |hit| blocked.push(hit));
+    Ok(())
 }
 
 #[cfg(test)]

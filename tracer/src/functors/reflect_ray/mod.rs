@@ -12,117 +12,102 @@
 //! 0`, zero weight), so with `maxDepth` the pipeline traces at most `maxDepth`
 //! segments per camera ray (the camera ray included).
 
+use crate::functors::tracer_functor;
 use crate::functors::wgsl::{
-    diagonal_failure, request_resources, surface_module, twin, vector_module, TwinParts,
+    diagonal_failure, request_resources, surface_module, vector_module, TwinParts,
 };
 use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
 use crate::scene::TraceResources;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, HostValue,
     RecordId, Signature,
 };
 use glam::Vec3;
+use std::sync::Arc;
 
-pub struct ReflectRay {
-    signature: Signature,
+pub fn functor(surface: RecordId, ray: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("reflectRay")
+        .input("surf", ElemType::Record(surface))
+        .output("ray", ElemType::Record(ray))
+        .named(
+            "maxDepth",
+            HostType::Int,
+            Some(HostValue::Int(3)),
+            "ray segments per camera ray: a reflection of depth >= maxDepth is dead",
+        )
+        .doc("mirror reflection of a reflective hit (weight * reflectivity, depth + 1); dead otherwise or at maxDepth");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl ReflectRay {
-    pub fn new(surface: RecordId, ray: RecordId) -> ReflectRay {
-        ReflectRay {
-            signature: Signature::map("reflectRay")
-                .input("surf", ElemType::Record(surface))
-                .output("ray", ElemType::Record(ray))
-                .named(
-                    "maxDepth",
-                    HostType::Int,
-                    Some(HostValue::Int(3)),
-                    "ray segments per camera ray: a reflection of depth >= maxDepth is dead",
-                )
-                .doc("mirror reflection of a reflective hit (weight * reflectivity, depth + 1); dead otherwise or at maxDepth"),
-        }
-    }
+/// `twin.wgsl`, reading the materials, built once per shading set-up.
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let shading = request_resources::<TraceResources>(request, "reflectRay")?.shading_gpu_buffers();
+    Ok(TwinParts {
+        modules: vec![vector_module(), surface_module()],
+        buffers: vec![shading.materials],
+        failures: vec![
+            diagonal_failure("reflectRay"),
+            "reflectRay: a surface has a material the scene does not have".into(),
+        ],
+        ..TwinParts::default()
+    })
 }
 
-impl Functor for ReflectRay {
-    fn signature(&self) -> &Signature {
-        &self.signature
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let max_depth = ctx.named(0).as_int().unwrap_or(0);
+    let materials = ctx.resources::<TraceResources>()?.shading.materials();
+    let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "reflectRay")?;
+    let surfaces = SurfaceColumns::new(&inputs[0]);
+    // Every material a reflected hit names must exist: checked up front, so
+    // that the loop below cannot fail.
+    let reflects =
+        |i: usize| surfaces.hit[i] && i64::from(surfaces.depth[i].saturating_add(1)) < max_depth;
+    if let Some(index) = (0..surfaces.len())
+        .find(|&i| reflects(i) && surfaces.material[i] as usize >= materials.len())
+    {
+        return Err(FunctorError::bad_input(format!(
+            "reflectRay: surface has material {}, but the scene has {} materials",
+            surfaces.material[index],
+            materials.len()
+        )));
     }
-
-    /// `twin.wgsl`, reading the materials, built once per shading set-up.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let shading =
-            request_resources::<TraceResources>(request, "reflectRay")?.shading_gpu_buffers();
-        let parts = TwinParts {
-            modules: vec![vector_module(), surface_module()],
-            buffers: vec![shading.materials],
-            failures: vec![
-                diagonal_failure("reflectRay"),
-                "reflectRay: a surface has a material the scene does not have".into(),
-            ],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let max_depth = ctx.named(0).as_int().unwrap_or(0);
-        let materials = ctx.resources::<TraceResources>()?.shading.materials();
-        let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "reflectRay")?;
-        let surfaces = SurfaceColumns::new(&inputs[0]);
-        // Every material a reflected hit names must exist: checked up front, so
-        // that the loop below cannot fail.
-        let reflects = |i: usize| {
-            surfaces.hit[i] && i64::from(surfaces.depth[i].saturating_add(1)) < max_depth
-        };
-        if let Some(index) = (0..surfaces.len())
-            .find(|&i| reflects(i) && surfaces.material[i] as usize >= materials.len())
-        {
-            return Err(FunctorError::bad_input(format!(
-                "reflectRay: surface has material {}, but the scene has {} materials",
-                surfaces.material[index],
-                materials.len()
-            )));
+    let mut out = RayWriter::new(&mut outputs[0], surfaces.len())?;
+    out.extend_with(surfaces.len(), |index| {
+        let surface = surfaces.get(index);
+        let depth = surface.depth.saturating_add(1);
+        if !reflects(index) {
+            return RayRecord::dead(surface.sample, depth);
         }
-        let mut out = RayWriter::new(&mut outputs[0], surfaces.len())?;
-        out.extend_with(surfaces.len(), |index| {
-            let surface = surfaces.get(index);
-            let depth = surface.depth.saturating_add(1);
-            if !reflects(index) {
-                return RayRecord::dead(surface.sample, depth);
-            }
-            let reflectivity = materials[surface.material as usize].reflectivity;
-            if reflectivity <= 0.0 {
-                return RayRecord::dead(surface.sample, depth);
-            }
-            let incoming = -surface.view;
-            let mirror = |normal: Vec3| incoming - 2.0 * incoming.dot(normal) * normal;
-            let mut dir = mirror(surface.normal);
-            if dir.dot(surface.geometric) <= 0.0 {
-                dir = mirror(surface.geometric);
-            }
-            RayRecord {
-                origin: surface.offset_origin(epsilon),
-                dir: dir.normalize_or_zero(),
-                tmax: f32::INFINITY,
-                sample: surface.sample,
-                weight: surface.weight * reflectivity,
-                depth,
-            }
-        });
-        Ok(())
-    }
+        let reflectivity = materials[surface.material as usize].reflectivity;
+        if reflectivity <= 0.0 {
+            return RayRecord::dead(surface.sample, depth);
+        }
+        let incoming = -surface.view;
+        let mirror = |normal: Vec3| incoming - 2.0 * incoming.dot(normal) * normal;
+        let mut dir = mirror(surface.normal);
+        if dir.dot(surface.geometric) <= 0.0 {
+            dir = mirror(surface.geometric);
+        }
+        RayRecord {
+            origin: surface.offset_origin(epsilon),
+            dir: dir.normalize_or_zero(),
+            tmax: f32::INFINITY,
+            sample: surface.sample,
+            weight: surface.weight * reflectivity,
+            depth,
+        }
+    });
+    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
-    use crate::functors::test_support::{read_rays, Fixture};
+    use crate::functors::test_support::{read_rays, surface_hit, Fixture};
     use crate::functors::{RayRecord, SurfaceRecord, SURFACE_EPSILON};
     use crate::shading::MaterialSpec;
     use dpp_runtime::HostValue;
@@ -142,16 +127,10 @@ mod tests {
 
     fn surface(view: Vec3, depth: u32) -> SurfaceRecord {
         SurfaceRecord {
-            position: Vec3::new(0.5, 0.5, 0.0),
-            normal: Vec3::Z,
             view,
-            scalar: 0.0,
-            material: 0,
-            hit: true,
-            sample: 9,
             weight: Vec3::new(1.0, 0.5, 0.25),
             depth,
-            geometric: Vec3::Z,
+            ..surface_hit(Vec3::new(0.5, 0.5, 0.0), Vec3::Z, 9)
         }
     }
 

@@ -18,180 +18,164 @@
 //!   the rest) and by `surf.weight`; a miss gives the background times
 //!   `surf.weight`.
 
+use crate::functors::tracer_functor;
 use crate::functors::wgsl::{
-    colormap_module, diagonal_failure, request_resources, surface_module, twin, vector_module,
-    TwinParts,
+    colormap_module, diagonal_failure, request_resources, surface_module, vector_module, TwinParts,
 };
 use crate::functors::{named_f32, scene_diagonal, SurfaceColumns};
 use crate::scene::TraceResources;
 use crate::shading::{PointLight, MAX_LIGHTS};
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, HostType, HostValue,
     RecordId, Signature,
 };
 use glam::Vec3;
+use std::sync::Arc;
 
-pub struct Shader {
-    signature: Signature,
+pub fn functor(surface: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("shader")
+        .input("surf", ElemType::Record(surface))
+        .input("occlusion", ElemType::F32)
+        .input("visible", ElemType::U32)
+        .output("rgb", ElemType::Vec3)
+        .named(
+            "ambient",
+            HostType::Float,
+            Some(HostValue::Float(0.15)),
+            "strength of the ambient term, scaled by 1 - occlusion",
+        )
+        .named(
+            "falloff",
+            HostType::Float,
+            Some(HostValue::Float(1.0)),
+            "k in the light attenuation intensity / (1 + k (d / scene.diagonal)^2); 0 turns it off",
+        )
+        .doc("Blinn-Phong: colour-mapped scalar times Kd, ambient scaled by 1 - occlusion, diffuse and specular from the visible lights; times (1 - reflectivity) and the ray weight (miss: background)");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl Shader {
-    pub fn new(surface: RecordId) -> Shader {
-        Shader {
-            signature: Signature::map("shader")
-                .input("surf", ElemType::Record(surface))
-                .input("occlusion", ElemType::F32)
-                .input("visible", ElemType::U32)
-                .output("rgb", ElemType::Vec3)
-                .named(
-                    "ambient",
-                    HostType::Float,
-                    Some(HostValue::Float(0.15)),
-                    "strength of the ambient term, scaled by 1 - occlusion",
-                )
-                .named(
-                    "falloff",
-                    HostType::Float,
-                    Some(HostValue::Float(1.0)),
-                    "k in the light attenuation intensity / (1 + k (d / scene.diagonal)^2); 0 turns it off",
-                )
-                .doc("Blinn-Phong: colour-mapped scalar times Kd, ambient scaled by 1 - occlusion, diffuse and specular from the visible lights; times (1 - reflectivity) and the ray weight (miss: background)"),
-        }
-    }
+/// `twin.wgsl`, reading materials, lights and colour map, built once per shading set-up.
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let shading = request_resources::<TraceResources>(request, "shader")?.shading_gpu_buffers();
+    Ok(TwinParts {
+        constants: vec![("MAX_LIGHTS", format!("{MAX_LIGHTS}u"))],
+        modules: vec![vector_module(), surface_module(), colormap_module(&shading)],
+        buffers: vec![shading.constants, shading.materials, shading.lights],
+        failures: vec![
+            "shader: ambient must be a finite number".into(),
+            "shader: falloff must be a finite number".into(),
+            diagonal_failure("shader"),
+            "shader: a surface has a material the scene does not have".into(),
+        ],
+    })
 }
 
-impl Functor for Shader {
-    fn signature(&self) -> &Signature {
-        &self.signature
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let ambient = named_f32(ctx, 0, "shader", "ambient")?;
+    let falloff = named_f32(ctx, 1, "shader", "falloff")?;
+    let shading = &ctx.resources::<TraceResources>()?.shading;
+    let diagonal = scene_diagonal(ctx, "shader")?;
+    let inverse_diagonal = 1.0 / diagonal;
+    let materials = shading.materials();
+    let lights = &shading.lights()[..shading.lights().len().min(MAX_LIGHTS)];
+    let colormap = shading.colormap();
+    let [low, high] = shading.scalar_range();
+    let inverse_range = 1.0 / (high - low);
+    let background = shading.background();
+
+    let surfaces = SurfaceColumns::new(&inputs[0]);
+    let len = surfaces.len();
+    // The same length for every column lets the loop drop its bounds checks.
+    let (positions, normals, views) = (
+        &surfaces.position[..len],
+        &surfaces.normal[..len],
+        &surfaces.view[..len],
+    );
+    let (scalars, material_ids, hits, weights) = (
+        &surfaces.scalar[..len],
+        &surfaces.material[..len],
+        &surfaces.hit[..len],
+        &surfaces.weight[..len],
+    );
+    let occlusion = &inputs[1].as_f32()[..len];
+    let visible = &inputs[2].as_u32()[..len];
+    // Every material a hit names must exist: checked up front, so that the
+    // loop below cannot fail.
+    if let Some(index) = (0..len).find(|&i| hits[i] && material_ids[i] as usize >= materials.len())
+    {
+        return Err(FunctorError::bad_input(format!(
+            "shader: surface has material {}, but the scene has {} materials",
+            material_ids[index],
+            materials.len()
+        )));
     }
-
-    /// `twin.wgsl`, reading materials, lights and colour map, built once per shading set-up.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let shading = request_resources::<TraceResources>(request, "shader")?.shading_gpu_buffers();
-        let parts = TwinParts {
-            constants: vec![("MAX_LIGHTS", format!("{MAX_LIGHTS}u"))],
-            modules: vec![vector_module(), surface_module(), colormap_module(&shading)],
-            buffers: vec![shading.constants, shading.materials, shading.lights],
-            failures: vec![
-                "shader: ambient must be a finite number".into(),
-                "shader: falloff must be a finite number".into(),
-                diagonal_failure("shader"),
-                "shader: a surface has a material the scene does not have".into(),
-            ],
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let ambient = named_f32(ctx, 0, "shader", "ambient")?;
-        let falloff = named_f32(ctx, 1, "shader", "falloff")?;
-        let shading = &ctx.resources::<TraceResources>()?.shading;
-        let diagonal = scene_diagonal(ctx, "shader")?;
-        let inverse_diagonal = 1.0 / diagonal;
-        let materials = shading.materials();
-        let lights = &shading.lights()[..shading.lights().len().min(MAX_LIGHTS)];
-        let colormap = shading.colormap();
-        let [low, high] = shading.scalar_range();
-        let inverse_range = 1.0 / (high - low);
-        let background = shading.background();
-
-        let surfaces = SurfaceColumns::new(&inputs[0]);
-        let len = surfaces.len();
-        // The same length for every column lets the loop drop its bounds checks.
-        let (positions, normals, views) = (
-            &surfaces.position[..len],
-            &surfaces.normal[..len],
-            &surfaces.view[..len],
-        );
-        let (scalars, material_ids, hits, weights) = (
-            &surfaces.scalar[..len],
-            &surfaces.material[..len],
-            &surfaces.hit[..len],
-            &surfaces.weight[..len],
-        );
-        let occlusion = &inputs[1].as_f32()[..len];
-        let visible = &inputs[2].as_u32()[..len];
-        // Every material a hit names must exist: checked up front, so that the
-        // loop below cannot fail.
-        if let Some(index) =
-            (0..len).find(|&i| hits[i] && material_ids[i] as usize >= materials.len())
-        {
-            return Err(FunctorError::bad_input(format!(
-                "shader: surface has material {}, but the scene has {} materials",
-                material_ids[index],
-                materials.len()
-            )));
+    let colors = outputs[0].as_vec3_mut();
+    colors.reserve(len);
+    let mut block = Block::new();
+    for start in (0..len).step_by(BLOCK) {
+        let end = len.min(start + BLOCK);
+        let mut out = [Vec3::ZERO; BLOCK];
+        // Misses are the background; hits go to lanes, in order.
+        let mut lanes = 0;
+        for index in start..end {
+            if hits[index] {
+                block.index[lanes] = index;
+                lanes += 1;
+            } else {
+                out[index - start] = background * weights[index];
+            }
         }
-        let colors = outputs[0].as_vec3_mut();
-        colors.reserve(len);
-        let mut block = Block::new();
-        for start in (0..len).step_by(BLOCK) {
-            let end = len.min(start + BLOCK);
-            let mut out = [Vec3::ZERO; BLOCK];
-            // Misses are the background; hits go to lanes, in order.
-            let mut lanes = 0;
-            for index in start..end {
-                if hits[index] {
-                    block.index[lanes] = index;
-                    lanes += 1;
+        for lane in 0..lanes {
+            let index = block.index[lane];
+            let material = &materials[material_ids[index] as usize];
+            let base = colormap.linear_at((scalars[index] - low) * inverse_range) * material.kd;
+            let open = 1.0 - occlusion[index].clamp(0.0, 1.0);
+            block.local[lane] = ambient * open * base;
+            block.base[lane] = base;
+            let (normal, view) = (normals[index], views[index]);
+            block.sees_viewer[lane] = normal.dot(view) > 0.0;
+            block.position.set(lane, positions[index]);
+            block.normal.set(lane, normal);
+            block.view.set(lane, view);
+        }
+        for (light_index, light) in lights.iter().enumerate() {
+            block.light(light, lanes, inverse_diagonal, falloff);
+            let bit = 1 << light_index;
+            for lane in 0..lanes {
+                let index = block.index[lane];
+                if visible[index] & bit == 0 {
+                    continue;
+                }
+                let diffuse = block.diffuse[lane];
+                // Also false for NaN (a light exactly at the point).
+                let in_front = diffuse > 0.0;
+                if !in_front {
+                    continue;
+                }
+                let material = &materials[material_ids[index] as usize];
+                let specular = if block.sees_viewer[lane] {
+                    block.normal_dot_half[lane].max(0.0).powf(material.ns)
                 } else {
-                    out[index - start] = background * weights[index];
-                }
+                    0.0
+                };
+                block.local[lane] += block.attenuation[lane]
+                    * light.color
+                    * (block.base[lane] * diffuse + material.ks * specular);
             }
-            for lane in 0..lanes {
-                let index = block.index[lane];
-                let material = &materials[material_ids[index] as usize];
-                let base = colormap.linear_at((scalars[index] - low) * inverse_range) * material.kd;
-                let open = 1.0 - occlusion[index].clamp(0.0, 1.0);
-                block.local[lane] = ambient * open * base;
-                block.base[lane] = base;
-                let (normal, view) = (normals[index], views[index]);
-                block.sees_viewer[lane] = normal.dot(view) > 0.0;
-                block.position.set(lane, positions[index]);
-                block.normal.set(lane, normal);
-                block.view.set(lane, view);
-            }
-            for (light_index, light) in lights.iter().enumerate() {
-                block.light(light, lanes, inverse_diagonal, falloff);
-                let bit = 1 << light_index;
-                for lane in 0..lanes {
-                    let index = block.index[lane];
-                    if visible[index] & bit == 0 {
-                        continue;
-                    }
-                    let diffuse = block.diffuse[lane];
-                    // Also false for NaN (a light exactly at the point).
-                    let in_front = diffuse > 0.0;
-                    if !in_front {
-                        continue;
-                    }
-                    let material = &materials[material_ids[index] as usize];
-                    let specular = if block.sees_viewer[lane] {
-                        block.normal_dot_half[lane].max(0.0).powf(material.ns)
-                    } else {
-                        0.0
-                    };
-                    block.local[lane] += block.attenuation[lane]
-                        * light.color
-                        * (block.base[lane] * diffuse + material.ks * specular);
-                }
-            }
-            for lane in 0..lanes {
-                let index = block.index[lane];
-                let material = &materials[material_ids[index] as usize];
-                out[index - start] =
-                    block.local[lane] * (1.0 - material.reflectivity) * weights[index];
-            }
-            colors.extend_from_slice(&out[..end - start]);
         }
-        Ok(())
+        for lane in 0..lanes {
+            let index = block.index[lane];
+            let material = &materials[material_ids[index] as usize];
+            out[index - start] = block.local[lane] * (1.0 - material.reflectivity) * weights[index];
+        }
+        colors.extend_from_slice(&out[..end - start]);
     }
+    Ok(())
 }
 
 /// Surfaces shaded together: the hits of up to `BLOCK` consecutive surfaces
@@ -288,7 +272,7 @@ impl Block {
 
 #[cfg(test)]
 mod tests {
-    use crate::functors::test_support::Fixture;
+    use crate::functors::test_support::{surface_hit, Fixture};
     use crate::functors::SurfaceRecord;
     use crate::shading::{MaterialSpec, PointLight};
     use dpp_runtime::{Column, HostValue};
@@ -310,16 +294,8 @@ mod tests {
 
     fn lit_point() -> SurfaceRecord {
         SurfaceRecord {
-            position: Vec3::ZERO,
-            normal: Vec3::Z,
-            view: Vec3::Z,
             scalar: 1.0,
-            material: 0,
-            hit: true,
-            sample: 0,
-            weight: Vec3::ONE,
-            depth: 0,
-            geometric: Vec3::Z,
+            ..surface_hit(Vec3::ZERO, Vec3::Z, 0)
         }
     }
 

@@ -11,119 +11,90 @@
 //! the shader does not light anyway), gives a dead ray (`tmax = 0`), which
 //! `occluded` reports as not blocked.
 
+use crate::functors::tracer_functor;
 use crate::functors::wgsl::{
-    diagonal_failure, request_resources, surface_module, twin, vector_module, TwinParts,
+    diagonal_failure, request_resources, surface_module, vector_module, TwinParts,
 };
 use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
 use crate::scene::TraceResources;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
+use std::sync::Arc;
 
-pub struct ShadowRay {
-    signature: Signature,
+pub fn functor(surface: RecordId, ray: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::expand("shadowRay")
+        .input("surf", ElemType::Record(surface))
+        .output("ray", ElemType::Record(ray))
+        .doc("lane j: the ray from the surface point to light j (fanout: scene.lights); dead for a miss or a light behind the surface");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl ShadowRay {
-    pub fn new(surface: RecordId, ray: RecordId) -> ShadowRay {
-        ShadowRay {
-            signature: Signature::expand("shadowRay")
-                .input("surf", ElemType::Record(surface))
-                .output("ray", ElemType::Record(ray))
-                .doc("lane j: the ray from the surface point to light j (fanout: scene.lights); dead for a miss or a light behind the surface"),
-        }
-    }
+/// `twin.wgsl`, reading the lights, built once per shading set-up.
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let shading = request_resources::<TraceResources>(request, "shadowRay")?.shading_gpu_buffers();
+    Ok(TwinParts {
+        modules: vec![vector_module(), surface_module()],
+        buffers: vec![shading.lights],
+        failures: vec![
+            "shadowRay: the fanout is not the scene's number of lights; use fanout: scene.lights"
+                .into(),
+            diagonal_failure("shadowRay"),
+        ],
+        ..TwinParts::default()
+    })
 }
 
-impl Functor for ShadowRay {
-    fn signature(&self) -> &Signature {
-        &self.signature
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let lights = ctx.resources::<TraceResources>()?.shading.lights();
+    let lanes = ctx.group;
+    if lanes != lights.len() {
+        return Err(FunctorError::bad_input(format!(
+            "shadowRay: fanout {lanes}, but the scene has {} lights; use fanout: scene.lights",
+            lights.len()
+        )));
     }
-
-    /// `twin.wgsl`, reading the lights, built once per shading set-up.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let shading =
-            request_resources::<TraceResources>(request, "shadowRay")?.shading_gpu_buffers();
-        let parts = TwinParts {
-            modules: vec![vector_module(), surface_module()],
-            buffers: vec![shading.lights],
-            failures: vec![
-                "shadowRay: the fanout is not the scene's number of lights; use fanout: scene.lights"
-                    .into(),
-                diagonal_failure("shadowRay"),
-            ],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let lights = ctx.resources::<TraceResources>()?.shading.lights();
-        let lanes = ctx.group;
-        if lanes != lights.len() {
-            return Err(FunctorError::bad_input(format!(
-                "shadowRay: fanout {lanes}, but the scene has {} lights; use fanout: scene.lights",
-                lights.len()
-            )));
-        }
-        let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "shadowRay")?;
-        let surfaces = SurfaceColumns::new(&inputs[0]);
-        let mut out = RayWriter::new(&mut outputs[0], surfaces.len() * lanes)?;
-        out.extend_groups(surfaces.len(), lanes, |index| {
-            let surface = surfaces.get(index);
-            let origin = surface.offset_origin(epsilon);
-            move |lane| {
-                let dead = RayRecord::dead(surface.sample, surface.depth);
-                if !surface.hit {
-                    return dead;
-                }
-                let to_light = lights[lane].position - origin;
-                let distance = to_light.length();
-                let tmax = distance - epsilon;
-                if !(surface.normal.dot(to_light) > 0.0 && tmax > 0.0) {
-                    return dead;
-                }
-                RayRecord {
-                    origin,
-                    dir: to_light / distance,
-                    tmax,
-                    sample: surface.sample,
-                    weight: surface.weight,
-                    depth: surface.depth,
-                }
+    let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "shadowRay")?;
+    let surfaces = SurfaceColumns::new(&inputs[0]);
+    let mut out = RayWriter::new(&mut outputs[0], surfaces.len() * lanes)?;
+    out.extend_groups(surfaces.len(), lanes, |index| {
+        let surface = surfaces.get(index);
+        let origin = surface.offset_origin(epsilon);
+        move |lane| {
+            let dead = RayRecord::dead(surface.sample, surface.depth);
+            if !surface.hit {
+                return dead;
             }
-        });
-        Ok(())
-    }
+            let to_light = lights[lane].position - origin;
+            let distance = to_light.length();
+            let tmax = distance - epsilon;
+            if !(surface.normal.dot(to_light) > 0.0 && tmax > 0.0) {
+                return dead;
+            }
+            RayRecord {
+                origin,
+                dir: to_light / distance,
+                tmax,
+                sample: surface.sample,
+                weight: surface.weight,
+                depth: surface.depth,
+            }
+        }
+    });
+    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
-    use crate::functors::test_support::{read_rays, Fixture};
+    use crate::functors::test_support::{read_rays, surface_hit, Fixture};
     use crate::functors::{RayRecord, SurfaceRecord, SURFACE_EPSILON};
     use crate::shading::PointLight;
     use glam::Vec3;
-
-    pub fn surface_at(position: Vec3, normal: Vec3, sample: u32) -> SurfaceRecord {
-        SurfaceRecord {
-            position,
-            normal,
-            view: normal,
-            scalar: 0.0,
-            material: 0,
-            hit: true,
-            sample,
-            weight: Vec3::ONE,
-            depth: 0,
-            geometric: normal,
-        }
-    }
 
     #[test]
     fn one_ray_per_light_towards_it() {
@@ -138,7 +109,7 @@ mod tests {
         let diagonal = fixture.resources.scene.bounds.diagonal();
         let epsilon = SURFACE_EPSILON * diagonal;
         let surfaces = fixture.surfaces(&[
-            surface_at(Vec3::ZERO, Vec3::Z, 5),
+            surface_hit(Vec3::ZERO, Vec3::Z, 5),
             SurfaceRecord::miss(6, Vec3::ONE, 1),
         ]);
         let out = fixture
@@ -164,7 +135,7 @@ mod tests {
         // Traced from the big square under the small one: the small square blocks
         // the light straight above; the ray to (6, 0, 1) passes z = 0 at x = 3,
         // beside the small square.
-        let from_big = fixture.surfaces(&[surface_at(Vec3::new(0.0, 0.0, -1.0), Vec3::Z, 0)]);
+        let from_big = fixture.surfaces(&[surface_hit(Vec3::new(0.0, 0.0, -1.0), Vec3::Z, 0)]);
         let out = fixture
             .run_grouped("shadowRay", &[], 3, 0, &[from_big.view()])
             .unwrap();
@@ -182,7 +153,7 @@ mod tests {
         let light = PointLight::new(Vec3::new(5.0, 0.5, 1.0), 1.0);
         fixture.set_shading(|shading| shading.set_lights(vec![light]).unwrap());
         let epsilon = SURFACE_EPSILON * fixture.resources.scene.bounds.diagonal();
-        let mut surface = surface_at(Vec3::new(0.5, 0.5, 0.0), Vec3::new(1.0, 0.0, -0.2), 0);
+        let mut surface = surface_hit(Vec3::new(0.5, 0.5, 0.0), Vec3::new(1.0, 0.0, -0.2), 0);
         surface.normal = surface.normal.normalize();
         surface.geometric = Vec3::Z;
         let surfaces = fixture.surfaces(&[surface]);
@@ -199,7 +170,7 @@ mod tests {
     #[test]
     fn fanout_must_match_the_lights() {
         let fixture = Fixture::new();
-        let surfaces = fixture.surfaces(&[surface_at(Vec3::ZERO, Vec3::Z, 0)]);
+        let surfaces = fixture.surfaces(&[surface_hit(Vec3::ZERO, Vec3::Z, 0)]);
         let error = fixture
             .run_grouped("shadowRay", &[], 3, 0, &[surfaces.view()])
             .unwrap_err();

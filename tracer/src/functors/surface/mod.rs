@@ -20,166 +20,153 @@
 //! A miss gives `hit = false` and zeros except `sample`, `weight` and `depth`;
 //! a dead ray (`tmax <= 0`) gives a miss with zero weight, so it shades to black.
 
+use crate::functors::tracer_functor;
 use crate::functors::wgsl::{
-    f32_literal, mesh_module, request_resources, twin, vector_module, TwinParts,
+    f32_literal, mesh_module, request_resources, vector_module, TwinParts,
 };
 use crate::functors::{HitColumns, RayColumns, SurfaceRecord, SurfaceWriter, MISS_PRIM};
 use crate::prefetch::{prefetch, prefetch_hit_ahead};
 use crate::scene::TraceResources;
 use crate::vector::unit_or_zero;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
 use glam::Vec3;
+use std::sync::Arc;
 
 /// The least `normal·view` of a shading normal: the interpolated normal is bent
 /// towards the viewer up to this, so no shading point faces away from the ray.
 pub const MIN_VIEW_COSINE: f32 = 0.01;
 
-pub struct SurfaceFunctor {
-    signature: Signature,
+pub fn functor(ray: RecordId, hit: RecordId, surface: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("surface")
+        .input("ray", ElemType::Record(ray))
+        .input("hit", ElemType::Record(hit))
+        .output("surf", ElemType::Record(surface))
+        .doc("the shading point of a hit: position, interpolated normal facing the ray, view vector, interpolated scalar, material, geometric normal facing the ray (miss: hit = false)");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl SurfaceFunctor {
-    pub fn new(ray: RecordId, hit: RecordId, surface: RecordId) -> SurfaceFunctor {
-        SurfaceFunctor {
-            signature: Signature::map("surface")
-                .input("ray", ElemType::Record(ray))
-                .input("hit", ElemType::Record(hit))
-                .output("surf", ElemType::Record(surface))
-                .doc("the shading point of a hit: position, interpolated normal facing the ray, view vector, interpolated scalar, material, geometric normal facing the ray (miss: hit = false)"),
-        }
-    }
+/// `twin.wgsl`, reading the scene's triangles and vertices, built once per scene.
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let scene = &request_resources::<TraceResources>(request, "surface")?.scene;
+    // As `facing_the_viewer` computes it.
+    let min_view_sine = (1.0 - MIN_VIEW_COSINE * MIN_VIEW_COSINE).sqrt();
+    Ok(TwinParts {
+        constants: vec![
+            ("MISS_PRIM", format!("{MISS_PRIM}u")),
+            ("MIN_VIEW_COSINE", f32_literal(MIN_VIEW_COSINE)),
+            ("MIN_VIEW_SINE", f32_literal(min_view_sine)),
+        ],
+        modules: vec![vector_module(), mesh_module(scene.gpu_buffers())],
+        failures: vec!["surface: a hit names a triangle the scene does not have".into()],
+        ..TwinParts::default()
+    })
 }
 
-impl Functor for SurfaceFunctor {
-    fn signature(&self) -> &Signature {
-        &self.signature
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let scene = &ctx.resources::<TraceResources>()?.scene;
+    let mesh = &scene.mesh;
+    let rays = RayColumns::new(&inputs[0]);
+    let hits = HitColumns::new(&inputs[1]);
+    let len = rays.len();
+    // The same length for every column lets the loop drop its bounds checks.
+    let (dirs, tmaxs, samples) = (&rays.dir[..len], &rays.tmax[..len], &rays.sample[..len]);
+    let (weights, depths) = (&rays.weight[..len], &rays.depth[..len]);
+    let (prims, us, vs) = (&hits.prim[..len], &hits.u[..len], &hits.v[..len]);
+    let triangles = mesh.triangles.as_slice();
+    let positions = mesh.positions.as_slice();
+    let normals = mesh.normals.as_deref();
+    let scalars = mesh.scalars.as_deref();
+    let triangle_materials = scene.materials.triangle_materials.as_slice();
+    // The triangle a live ray hit (none for a miss, a dead ray, or past the end).
+    let live_prim = |index: usize| {
+        let prim = *prims.get(index)?;
+        (prim != MISS_PRIM && tmaxs[index] > 0.0).then_some(prim as usize)
+    };
+    // Every triangle a live ray hits must exist: checked up front, so that the
+    // loop below cannot fail.
+    let names_no_triangle =
+        |index: usize| live_prim(index).is_some_and(|prim| prim >= triangles.len());
+    if let Some(index) = (0..len).find(|&index| names_no_triangle(index)) {
+        return Err(FunctorError::bad_input(format!(
+            "surface: hit names triangle {}, but the scene has {} triangles",
+            prims[index],
+            triangles.len()
+        )));
     }
-
-    /// `twin.wgsl`, reading the scene's triangles and vertices, built once per scene.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let scene = &request_resources::<TraceResources>(request, "surface")?.scene;
-        // As `facing_the_viewer` computes it.
-        let min_view_sine = (1.0 - MIN_VIEW_COSINE * MIN_VIEW_COSINE).sqrt();
-        let parts = TwinParts {
-            constants: vec![
-                ("MISS_PRIM", format!("{MISS_PRIM}u")),
-                ("MIN_VIEW_COSINE", f32_literal(MIN_VIEW_COSINE)),
-                ("MIN_VIEW_SINE", f32_literal(min_view_sine)),
-            ],
-            modules: vec![vector_module(), mesh_module(scene.gpu_buffers())],
-            failures: vec!["surface: a hit names a triangle the scene does not have".into()],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let scene = &ctx.resources::<TraceResources>()?.scene;
-        let mesh = &scene.mesh;
-        let rays = RayColumns::new(&inputs[0]);
-        let hits = HitColumns::new(&inputs[1]);
-        let len = rays.len();
-        // The same length for every column lets the loop drop its bounds checks.
-        let (dirs, tmaxs, samples) = (&rays.dir[..len], &rays.tmax[..len], &rays.sample[..len]);
-        let (weights, depths) = (&rays.weight[..len], &rays.depth[..len]);
-        let (prims, us, vs) = (&hits.prim[..len], &hits.u[..len], &hits.v[..len]);
-        let triangles = mesh.triangles.as_slice();
-        let positions = mesh.positions.as_slice();
-        let normals = mesh.normals.as_deref();
-        let scalars = mesh.scalars.as_deref();
-        let triangle_materials = scene.materials.triangle_materials.as_slice();
-        // The triangle a live ray hit (none for a miss, a dead ray, or past the end).
-        let live_prim = |index: usize| {
-            let prim = *prims.get(index)?;
-            (prim != MISS_PRIM && tmaxs[index] > 0.0).then_some(prim as usize)
-        };
-        // Every triangle a live ray hits must exist: checked up front, so that the
-        // loop below cannot fail.
-        let names_no_triangle =
-            |index: usize| live_prim(index).is_some_and(|prim| prim >= triangles.len());
-        if let Some(index) = (0..len).find(|&index| names_no_triangle(index)) {
-            return Err(FunctorError::bad_input(format!(
-                "surface: hit names triangle {}, but the scene has {} triangles",
-                prims[index],
-                triangles.len()
-            )));
+    let prefetch_ahead = |index: usize| {
+        prefetch_hit_ahead(index, live_prim, triangles, |prim, corners| {
+            prefetch(triangle_materials, prim);
+            for vertex in corners {
+                prefetch(positions, vertex);
+                normals.inspect(|normals| prefetch(normals, vertex));
+                scalars.inspect(|scalars| prefetch(scalars, vertex));
+            }
+        })
+    };
+    let mut out = SurfaceWriter::new(&mut outputs[0])?;
+    out.extend_with(len, |index| {
+        prefetch_ahead(index);
+        let (sample, depth) = (samples[index], depths[index]);
+        let alive = tmaxs[index] > 0.0;
+        if !alive {
+            return SurfaceRecord::miss(sample, Vec3::ZERO, depth);
         }
-        let prefetch_ahead = |index: usize| {
-            prefetch_hit_ahead(index, live_prim, triangles, |prim, corners| {
-                prefetch(triangle_materials, prim);
-                for vertex in corners {
-                    prefetch(positions, vertex);
-                    normals.inspect(|normals| prefetch(normals, vertex));
-                    scalars.inspect(|scalars| prefetch(scalars, vertex));
-                }
-            })
+        let prim = prims[index];
+        if prim == MISS_PRIM {
+            return SurfaceRecord::miss(sample, weights[index], depth);
+        }
+        let [a, b, c] = triangles[prim as usize].map(|vertex| vertex as usize);
+        let (u, v) = (us[index], vs[index]);
+        let w = 1.0 - u - v;
+        let [p0, p1, p2] = [positions[a], positions[b], positions[c]];
+        let position = w * p0 + u * p1 + v * p2;
+        let dir = dirs[index];
+        let view = -dir.normalize_or_zero();
+        // The geometric normal on the ray's side (or the view vector for a
+        // degenerate triangle, which a ray can hardly hit); as
+        // `TriangleMesh::face_normal` computes it.
+        let face = unit_or_zero((p1 - p0).cross(p2 - p0));
+        let facing = if face == Vec3::ZERO {
+            view
+        } else if face.dot(dir) > 0.0 {
+            -face
+        } else {
+            face
         };
-        let mut out = SurfaceWriter::new(&mut outputs[0], len)?;
-        out.extend_with(len, |index| {
-            prefetch_ahead(index);
-            let (sample, depth) = (samples[index], depths[index]);
-            let alive = tmaxs[index] > 0.0;
-            if !alive {
-                return SurfaceRecord::miss(sample, Vec3::ZERO, depth);
-            }
-            let prim = prims[index];
-            if prim == MISS_PRIM {
-                return SurfaceRecord::miss(sample, weights[index], depth);
-            }
-            let [a, b, c] = triangles[prim as usize].map(|vertex| vertex as usize);
-            let (u, v) = (us[index], vs[index]);
-            let w = 1.0 - u - v;
-            let [p0, p1, p2] = [positions[a], positions[b], positions[c]];
-            let position = w * p0 + u * p1 + v * p2;
-            let dir = dirs[index];
-            let view = -dir.normalize_or_zero();
-            // The geometric normal on the ray's side (or the view vector for a
-            // degenerate triangle, which a ray can hardly hit); as
-            // `TriangleMesh::face_normal` computes it.
-            let face = unit_or_zero((p1 - p0).cross(p2 - p0));
-            let facing = if face == Vec3::ZERO {
-                view
-            } else if face.dot(dir) > 0.0 {
-                -face
-            } else {
-                face
-            };
-            let interpolated = normals
-                .map(|n| (w * n[a] + u * n[b] + v * n[c]).normalize_or_zero())
-                .unwrap_or(Vec3::ZERO);
-            let normal = if interpolated == Vec3::ZERO {
-                facing
-            } else if interpolated.dot(facing) < 0.0 {
-                -interpolated
-            } else {
-                interpolated
-            };
-            let normal = facing_the_viewer(normal, view, facing);
-            let scalar = scalars.map_or(position.y, |s| w * s[a] + u * s[b] + v * s[c]);
-            SurfaceRecord {
-                position,
-                normal,
-                view,
-                scalar,
-                // As `TraceScene::triangle_material`.
-                material: triangle_materials.get(prim as usize).copied().unwrap_or(0),
-                hit: true,
-                sample,
-                weight: weights[index],
-                depth,
-                geometric: facing,
-            }
-        });
-        Ok(())
-    }
+        let interpolated = normals
+            .map(|n| (w * n[a] + u * n[b] + v * n[c]).normalize_or_zero())
+            .unwrap_or(Vec3::ZERO);
+        let normal = if interpolated == Vec3::ZERO {
+            facing
+        } else if interpolated.dot(facing) < 0.0 {
+            -interpolated
+        } else {
+            interpolated
+        };
+        let normal = facing_the_viewer(normal, view, facing);
+        let scalar = scalars.map_or(position.y, |s| w * s[a] + u * s[b] + v * s[c]);
+        SurfaceRecord {
+            position,
+            normal,
+            view,
+            scalar,
+            // As `TraceScene::triangle_material`.
+            material: triangle_materials.get(prim as usize).copied().unwrap_or(0),
+            hit: true,
+            sample,
+            weight: weights[index],
+            depth,
+            geometric: facing,
+        }
+    });
+    Ok(())
 }
 
 /// `normal` unchanged where `normal·view >= MIN_VIEW_COSINE`; otherwise the unit

@@ -5,67 +5,48 @@
 //! every opacity entry a value in it reads is 0. A block with no cells (`min
 //! > max`) is transparent.
 
-use crate::functors::wgsl::{request_resources, twin, vector_module, TwinParts};
+use crate::functors::tracer_functor;
+use crate::functors::wgsl::{request_resources, vector_module, TwinParts};
 use crate::scene::TraceResources;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{CallContext, Column, ColumnView, ElemType, Functor, FunctorError, Signature};
+use std::sync::Arc;
 
-pub struct Transparent {
-    signature: Signature,
+pub fn functor() -> Arc<dyn Functor> {
+    let signature = Signature::map("transparent")
+        .input("range", ElemType::Vec2)
+        .output("empty", ElemType::Bool)
+        .doc("whether the transfer function's opacity is 0 over the values range.x ..= -range.y");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl Transparent {
-    pub fn new() -> Transparent {
-        Transparent {
-            signature: Signature::map("transparent")
-                .input("range", ElemType::Vec2)
-                .output("empty", ElemType::Bool)
-                .doc("whether the transfer function's opacity is 0 over the values range.x ..= -range.y"),
-        }
-    }
+/// `twin.wgsl`, reading the colour map (opacity in `w`) and scalar range.
+fn twin_parts(request: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    let shading =
+        request_resources::<TraceResources>(request, "transparent")?.shading_gpu_buffers();
+    Ok(TwinParts {
+        modules: vec![vector_module()],
+        buffers: vec![shading.constants, shading.colormap],
+        ..TwinParts::default()
+    })
 }
 
-impl Default for Transparent {
-    fn default() -> Self {
-        Transparent::new()
-    }
-}
-
-impl Functor for Transparent {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    /// `twin.wgsl`, reading the colour map (opacity in `w`) and scalar range.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let shading =
-            request_resources::<TraceResources>(request, "transparent")?.shading_gpu_buffers();
-        let parts = TwinParts {
-            modules: vec![vector_module()],
-            buffers: vec![shading.constants, shading.colormap],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let shading = &ctx.resources::<TraceResources>()?.shading;
-        let [low, high] = shading.scalar_range();
-        // As `ShadingGpuBuffers` computes it for the twins.
-        let inverse_range = 1.0 / (high - low);
-        let map = shading.colormap();
-        let out = outputs[0].as_bool_mut();
-        out.extend(inputs[0].as_vec2().iter().map(|range| {
-            let (lo, hi) = (range.x, -range.y);
-            // A block without cells keeps its fill, min above max; NaN is empty too.
-            lo.partial_cmp(&hi).is_none_or(|order| order.is_gt())
-                || map.transparent_between((lo - low) * inverse_range, (hi - low) * inverse_range)
-        }));
-        Ok(())
-    }
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let shading = &ctx.resources::<TraceResources>()?.shading;
+    let [low, high] = shading.scalar_range();
+    // As `ShadingGpuBuffers` computes it for the twins.
+    let inverse_range = 1.0 / (high - low);
+    let map = shading.colormap();
+    let out = outputs[0].as_bool_mut();
+    out.extend(inputs[0].as_vec2().iter().map(|range| {
+        let (lo, hi) = (range.x, -range.y);
+        // A block without cells keeps its fill, min above max; NaN is empty too.
+        lo.partial_cmp(&hi).is_none_or(|order| order.is_gt())
+            || map.transparent_between((lo - low) * inverse_range, (hi - low) * inverse_range)
+    }));
+    Ok(())
 }

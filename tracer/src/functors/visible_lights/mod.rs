@@ -4,67 +4,55 @@
 //! the mask is set when light `j` is *not* blocked. At most 32 lights (the scene
 //! set-up refuses more).
 
-use crate::functors::wgsl::{twin, TwinParts};
+use crate::functors::tracer_functor;
+use crate::functors::wgsl::TwinParts;
 use crate::shading::MAX_LIGHTS;
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{CallContext, Column, ColumnView, ElemType, Functor, FunctorError, Signature};
+use std::sync::Arc;
 
-pub struct VisibleLights {
-    signature: Signature,
+pub fn functor() -> Arc<dyn Functor> {
+    let signature = Signature::group("visibleLights")
+        .input("blocked", ElemType::Bool)
+        .output("mask", ElemType::U32)
+        .doc(
+            "bit j set when light j of the group is not blocked (group: scene.lights, at most 32)",
+        );
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), twin_parts)
 }
 
-impl VisibleLights {
-    #[allow(clippy::new_without_default)]
-    pub fn new() -> VisibleLights {
-        VisibleLights {
-            signature: Signature::group("visibleLights")
-                .input("blocked", ElemType::Bool)
-                .output("mask", ElemType::U32)
-                .doc("bit j set when light j of the group is not blocked (group: scene.lights, at most 32)"),
-        }
-    }
+/// `twin.wgsl`: one bit per unblocked light of the group.
+fn twin_parts(_: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    Ok(TwinParts {
+        constants: vec![("MAX_LIGHTS", format!("{MAX_LIGHTS}u"))],
+        failures: vec![format!(
+            "visibleLights: the group must be 1 to {MAX_LIGHTS} lights (a mask holds {MAX_LIGHTS})"
+        )],
+        ..TwinParts::default()
+    })
 }
 
-impl Functor for VisibleLights {
-    fn signature(&self) -> &Signature {
-        &self.signature
+fn run_cpu(
+    ctx: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    let lights = ctx.group;
+    if lights == 0 || lights > MAX_LIGHTS {
+        return Err(FunctorError::bad_input(format!(
+            "visibleLights: group {lights}; a mask holds 1 to {MAX_LIGHTS} lights"
+        )));
     }
-
-    /// `twin.wgsl`: one bit per unblocked light of the group.
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        let parts = TwinParts {
-            constants: vec![("MAX_LIGHTS", format!("{MAX_LIGHTS}u"))],
-            failures: vec![format!(
-                "visibleLights: the group must be 1 to {MAX_LIGHTS} lights (a mask holds {MAX_LIGHTS})"
-            )],
-            ..TwinParts::default()
-        };
-        twin(&self.signature, request, include_str!("twin.wgsl"), parts)
-    }
-
-    fn run_cpu(
-        &self,
-        ctx: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let lights = ctx.group;
-        if lights == 0 || lights > MAX_LIGHTS {
-            return Err(FunctorError::bad_input(format!(
-                "visibleLights: group {lights}; a mask holds 1 to {MAX_LIGHTS} lights"
-            )));
-        }
-        let blocked = inputs[0].as_bool();
-        let masks = outputs[0].as_u32_mut();
-        masks.extend(blocked.chunks_exact(lights).map(|group| {
-            group
-                .iter()
-                .enumerate()
-                .filter(|(_, &blocked)| !blocked)
-                .fold(0u32, |mask, (light, _)| mask | (1 << light))
-        }));
-        Ok(())
-    }
+    let blocked = inputs[0].as_bool();
+    let masks = outputs[0].as_u32_mut();
+    masks.extend(blocked.chunks_exact(lights).map(|group| {
+        group
+            .iter()
+            .enumerate()
+            .filter(|(_, &blocked)| !blocked)
+            .fold(0u32, |mask, (light, _)| mask | (1 << light))
+    }));
+    Ok(())
 }
 
 #[cfg(test)]

@@ -50,13 +50,63 @@
 //! rounding of `n step` against `n` additions of `step`).
 
 use crate::functors::occ_ray_gen::pcg_hash;
-use crate::functors::record_fields_mut;
+use crate::functors::{named_f32, record_fields_mut};
 use crate::shading::ColorMap;
 use crate::volume::Volume;
 use dpp_runtime::{
-    Column, ColumnView, ElemType, FunctorError, RecordId, RecordRegistry, RecordType,
+    CallContext, Column, ColumnView, ElemType, FunctorError, HostType, NamedParam, RecordId,
+    RecordRegistry, RecordType,
 };
 use glam::{UVec3, Vec3};
+
+/// The `step` argument of the functors that march (read by [`step`]).
+pub(crate) const STEP: NamedParam = NamedParam {
+    name: "step",
+    ty: HostType::Float,
+    default: None,
+    doc: "the distance between samples (world units, > 0)",
+};
+
+/// The `size` argument of the empty-space skipping functors (read by [`block_size`]).
+pub(crate) const BLOCK_SIZE: NamedParam = NamedParam {
+    name: "size",
+    ty: HostType::Int,
+    default: None,
+    doc: "cells per side of a block (>= 1)",
+};
+
+/// The [`STEP`] argument, named parameter `index`: finite and positive.
+pub(crate) fn step(
+    ctx: &CallContext<'_>,
+    index: usize,
+    functor: &str,
+) -> Result<f32, FunctorError> {
+    let step = named_f32(ctx, index, functor, "step")?;
+    if step > 0.0 {
+        Ok(step)
+    } else {
+        Err(FunctorError::bad_input(format!(
+            "{functor}: step must be above 0, got {step}"
+        )))
+    }
+}
+
+/// The [`BLOCK_SIZE`] argument, named parameter `index`: at least 1.
+pub(crate) fn block_size(
+    ctx: &CallContext<'_>,
+    index: usize,
+    functor: &str,
+) -> Result<u32, FunctorError> {
+    ctx.named(index)
+        .as_u32()
+        .filter(|&size| size >= 1)
+        .ok_or_else(|| {
+            FunctorError::bad_input(format!(
+                "{functor}: size must be at least 1, got {}",
+                ctx.named(index)
+            ))
+        })
+}
 
 /// Registers the `March` record; returns its id.
 pub fn register_march_record(records: &mut RecordRegistry) -> RecordId {

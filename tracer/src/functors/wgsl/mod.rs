@@ -39,15 +39,6 @@ pub(crate) fn vec3_literal(v: glam::Vec3) -> String {
     )
 }
 
-/// The failure of a traversal whose stack overflowed (the CPU's build keeps
-/// trees within it, so this marks a BVH the GPU does not read as the CPU does).
-pub(crate) fn stack_overflow_failure(functor: &str) -> String {
-    format!(
-        "{functor}: the BVH traversal needed more than {} stack entries",
-        Bvh::gpu_max_stack_depth()
-    )
-}
-
 /// The failure of a twin that found no positive `scene.diagonal` uniform.
 pub(crate) fn diagonal_failure(functor: &str) -> String {
     format!("{functor}: the scene.diagonal uniform is not a positive number (no scene loaded?)")
@@ -254,6 +245,26 @@ pub(crate) struct TwinParts<'a> {
     pub buffers: Vec<GpuBuffer>,
     /// The messages of `$FUNCTION_fail(code)`, by code.
     pub failures: Vec<String>,
+}
+
+/// The parts of the twin of `functor`, a traversal of the scene's BVH: the
+/// BVH module, and failure 0 for a traversal whose stack overflowed (the
+/// CPU's build keeps trees within it, so this marks a BVH the GPU does not
+/// read as the CPU does).
+pub(crate) fn bvh_traversal_parts(scene: &SceneGpuBuffers, functor: &str) -> TwinParts<'static> {
+    TwinParts {
+        modules: vec![vector_module(), bvh_module(scene)],
+        failures: vec![format!(
+            "{functor}: the BVH traversal needed more than {} stack entries",
+            Bvh::gpu_max_stack_depth()
+        )],
+        ..TwinParts::default()
+    }
+}
+
+/// The parts of a twin whose template needs nothing besides itself: none.
+pub(crate) fn no_parts(_: &WgslRequest<'_>) -> Result<TwinParts<'static>, FunctorError> {
+    Ok(TwinParts::default())
 }
 
 /// A functor's twin: its template instantiated for `request`, which must ask

@@ -5,56 +5,29 @@
 //! (`pipelines/workload3_expressions.dpp`: `surf.weight * m.reflectivity`)
 //! sets it on `reflectRay`'s ray with this.
 
-use crate::functors::wgsl::{twin, TwinParts};
-use dpp_runtime::wgsl::{WgslRequest, WgslTwin};
+use crate::functors::wgsl::no_parts;
+use crate::functors::{tracer_functor, with_field_replaced, RAY_WEIGHT_FIELD};
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
+use std::sync::Arc;
 
-/// `weight`'s place among `Ray`'s fields (`functors::register_records`).
-const WEIGHT_FIELD: usize = 4;
-
-pub struct WithWeight {
-    signature: Signature,
+pub fn functor(ray: RecordId) -> Arc<dyn Functor> {
+    let signature = Signature::map("withWeight")
+        .input("ray", ElemType::Record(ray))
+        .input("weight", ElemType::Vec3)
+        .output("ray", ElemType::Record(ray))
+        .doc("the ray with its colour weight replaced, every other field kept");
+    tracer_functor(signature, run_cpu, include_str!("twin.wgsl"), no_parts)
 }
 
-impl WithWeight {
-    pub fn new(ray: RecordId) -> WithWeight {
-        WithWeight {
-            signature: Signature::map("withWeight")
-                .input("ray", ElemType::Record(ray))
-                .input("weight", ElemType::Vec3)
-                .output("ray", ElemType::Record(ray))
-                .doc("the ray with its colour weight replaced, every other field kept"),
-        }
-    }
-}
-
-impl Functor for WithWeight {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    fn wgsl(&self, request: &WgslRequest<'_>) -> Result<WgslTwin, FunctorError> {
-        twin(
-            &self.signature,
-            request,
-            include_str!("twin.wgsl"),
-            TwinParts::default(),
-        )
-    }
-
-    fn run_cpu(
-        &self,
-        _: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let mut rays = inputs[0].to_column();
-        *rays.field_mut(WEIGHT_FIELD) = inputs[1].to_column();
-        outputs[0] = rays;
-        Ok(())
-    }
+fn run_cpu(
+    _: &CallContext<'_>,
+    inputs: &[ColumnView<'_>],
+    outputs: &mut [Column],
+) -> Result<(), FunctorError> {
+    outputs[0] = with_field_replaced(&inputs[0], RAY_WEIGHT_FIELD, |_| inputs[1].to_column());
+    Ok(())
 }
 
 #[cfg(test)]
@@ -74,7 +47,7 @@ mod tests {
             .run("withWeight", &[], 0, &[rays.view(), weights.view()])
             .unwrap();
         for field in 0..6 {
-            let expected = if field == super::WEIGHT_FIELD {
+            let expected = if field == crate::functors::RAY_WEIGHT_FIELD {
                 weights.clone()
             } else {
                 (*rays.field(field).unwrap()).clone()
