@@ -179,6 +179,8 @@ pub enum EmbreeTest {
 /// at its default quality, or (`…High`) at `RTC_BUILD_QUALITY_HIGH`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(not(feature = "embree"), allow(dead_code))]
+// The names say which engine, as the reports print them.
+#[allow(clippy::enum_variant_names)]
 pub enum Engine {
     EmbreeSingle,
     EmbreePacket,
@@ -197,6 +199,7 @@ impl Engine {
     }
 
     /// Whether its scene was built at `RTC_BUILD_QUALITY_HIGH`.
+    #[cfg_attr(not(feature = "embree"), allow(dead_code))]
     pub fn high_quality(self) -> bool {
         matches!(self, Engine::EmbreeSingleHigh | Engine::EmbreePacketHigh)
     }

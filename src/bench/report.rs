@@ -100,6 +100,10 @@ impl Report {
             .any(|w| w.workload == workload)
     }
 
+    fn has_embree_builds(&self) -> bool {
+        self.scenes.iter().any(|s| s.embree_build_ms.is_some())
+    }
+
     fn has_engines(&self) -> bool {
         self.scenes
             .iter()
@@ -212,7 +216,12 @@ impl Report {
     /// and with Embree's single rays and packets on each of its two scenes.
     fn write_bvh_builds(&self, md: &mut String) {
         let _ = writeln!(md, "## BVH builds and their trace rates\n");
-        let _ = writeln!(md, "Build: the BVH of the loaded mesh (dpp: obvhs's PLOC build and our flattening; Embree: copying the mesh into its buffers and `rtcCommitScene`, at its default quality, `RTC_BUILD_QUALITY_MEDIUM`, and at `RTC_BUILD_QUALITY_HIGH`). Trace rate: WORKLOAD1's primary rays over its `map<intersect>` stage (unfused plan), mean over the views, with that BVH behind `intersect`.\n");
+        let embree = if self.has_embree_builds() {
+            "; Embree: copying the mesh into its buffers and `rtcCommitScene`, at its default quality, `RTC_BUILD_QUALITY_MEDIUM`, and at `RTC_BUILD_QUALITY_HIGH`"
+        } else {
+            ""
+        };
+        let _ = writeln!(md, "Build: the BVH of the loaded mesh (dpp: obvhs's PLOC build and our flattening{embree}). Trace rate: WORKLOAD1's primary rays over its `map<intersect>` stage (unfused plan), mean over the views, with that BVH behind `intersect`.\n");
         let _ = writeln!(
             md,
             "| scene | BVH | build ms | build / dpp's | `map<intersect>` Mrays/s | rate / dpp's |"
@@ -281,7 +290,12 @@ impl Report {
     /// dpp's BVH and with each of Embree's behind `intersect` (16-ray packets).
     fn write_time_to_first_image(&self, md: &mut String) {
         let _ = writeln!(md, "## Time to first image: WORKLOAD2\n");
-        let _ = writeln!(md, "Compiling the fused plan, loading the mesh, its vertex normals, the BVH and the first fused frame on the first view (no arrays of an earlier frame to reuse); with Embree, its BVH instead of dpp's and its 16-ray packets behind `intersect`, the rest the same. Last column: the time to first image over dpp's.\n");
+        let embree = if self.has_embree_builds() {
+            "; with Embree, its BVH instead of dpp's and its 16-ray packets behind `intersect`, the rest the same"
+        } else {
+            ""
+        };
+        let _ = writeln!(md, "Compiling the fused plan, loading the mesh, its vertex normals, the BVH and the first fused frame on the first view (no arrays of an earlier frame to reuse){embree}. Last column: the time to first image over dpp's.\n");
         let _ = writeln!(md, "| scene | view | BVH | compile ms | load ms | normals ms | BVH ms | first frame ms | time to first image ms | / dpp's |");
         let _ = writeln!(
             md,
@@ -364,7 +378,7 @@ impl Report {
         }
 
         let _ = writeln!(md, "## Scenes\n");
-        let embree = self.scenes.iter().any(|s| s.embree_build_ms.is_some());
+        let embree = self.has_embree_builds();
         let _ = writeln!(
             md,
             "| scene | triangles | load ms | normals ms | BVH build ms |{}",

@@ -301,10 +301,13 @@ impl<'a> Body<'a> {
                     })
                     .sum();
                 match fixed_size {
+                    // Records without properties have nothing to decode (and a
+                    // count in the billions would make as many empty chunks).
+                    Some(0) => self.position,
                     Some(size) => {
                         // The chunks are arithmetic.
                         let left = bytes.len() - self.position;
-                        if size > 0 && left / size < element.count {
+                        if left / size < element.count {
                             return Err(missing(left / size));
                         }
                         for first in (0..element.count).step_by(per_chunk) {
@@ -409,7 +412,7 @@ impl<'a> Records<'a> {
             unreachable!("a list property");
         };
         let count = match self.encoding {
-            BodyEncoding::Ascii => self.token().and_then(|token| parse_ascii::<usize>(token)),
+            BodyEncoding::Ascii => self.token().and_then(parse_ascii::<usize>),
             BodyEncoding::Binary { big_endian } => {
                 let count = binary_list_count(&self.bytes[self.position..], count_kind, big_endian);
                 self.position += size_of_scalar(count_kind);
