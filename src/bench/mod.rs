@@ -175,13 +175,17 @@ pub enum EmbreeTest {
     Fast,
 }
 
-/// Embree's modes, the engines WORKLOAD1 is compared with.
+/// Embree's modes, the engines WORKLOAD1 is compared with: its scene built
+/// at its default quality, or (`…High`) at `RTC_BUILD_QUALITY_HIGH`.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(not(feature = "embree"), allow(dead_code))]
+// The names say which engine, as the reports print them.
+#[allow(clippy::enum_variant_names)]
 pub enum Engine {
-    #[cfg_attr(not(feature = "embree"), allow(dead_code))]
     EmbreeSingle,
-    #[cfg_attr(not(feature = "embree"), allow(dead_code))]
     EmbreePacket,
+    EmbreeSingleHigh,
+    EmbreePacketHigh,
 }
 
 impl Engine {
@@ -189,7 +193,15 @@ impl Engine {
         match self {
             Engine::EmbreeSingle => "embree-single",
             Engine::EmbreePacket => "embree-packet",
+            Engine::EmbreeSingleHigh => "embree-single-high",
+            Engine::EmbreePacketHigh => "embree-packet-high",
         }
+    }
+
+    /// Whether its scene was built at `RTC_BUILD_QUALITY_HIGH`.
+    #[cfg_attr(not(feature = "embree"), allow(dead_code))]
+    pub fn high_quality(self) -> bool {
+        matches!(self, Engine::EmbreeSingleHigh | Engine::EmbreePacketHigh)
     }
 }
 
@@ -344,6 +356,10 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
 pub struct Measurement {
     /// Wall time of each measured frame (`run_plan`, `run_plan_gpu`), in ms.
     pub frames_ms: Vec<f64>,
+    /// Wall time of the plan's first frame on the view (the first warm-up
+    /// round, or the first measured one without warm-up): no array of an
+    /// earlier frame to reuse, as for a first image.
+    pub first_frame_ms: f64,
     pub stages: Vec<StageTime>,
     /// On the GPU: wall time of each profiled run the stage times come from
     /// (profiling waits after every stage, so these are slower). Empty on the CPU.
@@ -545,8 +561,10 @@ pub struct SceneResult {
     pub normals_ms: f64,
     /// dpp's BVH (obvhs build and flattening).
     pub bvh_ms: f64,
-    /// Embree's scene (copy and BVH build), with `--engine embree`.
+    /// Embree's scene (copy and BVH build), with `--engine embree`, at its
+    /// default quality and at `RTC_BUILD_QUALITY_HIGH`.
     pub embree_build_ms: Option<f64>,
+    pub embree_high_build_ms: Option<f64>,
     pub views: Vec<ViewResult>,
 }
 
@@ -586,9 +604,15 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     }
 
     let mut plans = Vec::new();
+    // Part of WORKLOAD2's time to first image.
+    let mut workload2_compile_ms = None;
     for &workload in &setup.workloads {
         let path = setup.pipelines.join(format!("workload{workload}.dpp"));
+        let start = Instant::now();
         let fused = compile(&path, library, true)?;
+        if workload == 2 {
+            workload2_compile_ms = Some(ms(start.elapsed()));
+        }
         let unfused = compile(&path, library, false)?;
         plans.push((workload, path, fused, unfused));
     }
@@ -596,19 +620,20 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     // On the GPU the stage times come from as many profiled runs as measured ones.
     let profiled = if gpu.is_some() { args.rounds } else { 0 };
     let rounds = u64::from(args.warmup + args.rounds + profiled);
-    // With Embree: WORKLOAD1 fused and unfused, WORKLOAD2 and WORKLOAD3 fused,
-    // for each of its two modes.
-    let embree_plans = |workload: u32, plans: u64| {
+    // With Embree: WORKLOAD1 fused and unfused and WORKLOAD2 fused for each
+    // of its two modes on each of its two scenes, WORKLOAD3 fused on the
+    // default-quality scene.
+    let embree_plans = |workload: u32, plans: u64, engines: u64| {
         if setup.embree && setup.workloads.contains(&workload) {
-            2 * plans
+            engines * plans
         } else {
             0
         }
     };
     let per_view = 2 * setup.workloads.len() as u64
-        + embree_plans(1, 2)
-        + embree_plans(2, 1)
-        + embree_plans(3, 1);
+        + embree_plans(1, 2, 4)
+        + embree_plans(2, 1, 4)
+        + embree_plans(3, 1, 2);
     let total = setup.scenes.len() as u64 * setup.views.len() as u64 * per_view * rounds;
     let progress = progress_bar(total);
 
@@ -617,14 +642,31 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         progress.set_message(format!("{}: loading", spec.name()));
         let loaded = load(spec, &args, library)?;
         let scene = Arc::new(loaded.scene);
+        // Embree's scene at its default build quality and at its highest.
         #[cfg(feature = "embree")]
         let embree = if setup.embree {
-            progress.set_message(format!("{}: building Embree's BVH", spec.name()));
+            use dpp_tracer::functors::intersect_embree::{EmbreeQuality, EmbreeScene};
             let robust = setup.embree_test == EmbreeTest::Robust;
-            let built =
-                dpp_tracer::functors::intersect_embree::EmbreeScene::build(&scene.mesh, robust)
+            // Embree starts its worker threads with its first scene: a
+            // triangle's, so that neither timed build pays for that.
+            let triangle = TriangleMesh {
+                positions: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
+                triangles: vec![[0, 1, 2]],
+                normals: None,
+                scalars: None,
+            };
+            EmbreeScene::build(&triangle, robust).map_err(|e| Failure::Run(e.to_string()))?;
+            let mut built = Vec::new();
+            for quality in [EmbreeQuality::Default, EmbreeQuality::High] {
+                progress.set_message(format!(
+                    "{}: building Embree's BVH ({quality:?} quality)",
+                    spec.name()
+                ));
+                let scene = EmbreeScene::build_at(&scene.mesh, robust, quality)
                     .map_err(|e| Failure::Run(e.to_string()))?;
-            Some(Arc::new(built))
+                built.push(Arc::new(scene));
+            }
+            Some((built[0].clone(), built[1].clone()))
         } else {
             None
         };
@@ -638,9 +680,13 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
             normals_ms: ms(loaded.normals),
             bvh_ms: ms(loaded.bvh),
             #[cfg(feature = "embree")]
-            embree_build_ms: embree.as_ref().map(|e| ms(e.build_time)),
+            embree_build_ms: embree.as_ref().map(|e| ms(e.0.build_time)),
+            #[cfg(feature = "embree")]
+            embree_high_build_ms: embree.as_ref().map(|e| ms(e.1.build_time)),
             #[cfg(not(feature = "embree"))]
             embree_build_ms: None,
+            #[cfg(not(feature = "embree"))]
+            embree_high_build_ms: None,
             views: Vec::new(),
         };
         for (view_name, _) in &setup.views {
@@ -685,16 +731,21 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 });
             }
             #[cfg(feature = "embree")]
-            if let Some(embree) = &embree {
+            if let Some((embree, embree_high)) = &embree {
                 use dpp_tracer::functors::intersect_embree::{library_with_embree, EmbreeMode};
                 let path_of = |workload: u32| plans.iter().find(|p| p.0 == workload).map(|p| &p.1);
-                for (engine, mode) in [
-                    (Engine::EmbreeSingle, EmbreeMode::Single),
-                    (Engine::EmbreePacket, EmbreeMode::Packet16),
+                for (engine, mode, embree) in [
+                    (Engine::EmbreeSingle, EmbreeMode::Single, embree),
+                    (Engine::EmbreePacket, EmbreeMode::Packet16, embree),
+                    (Engine::EmbreeSingleHigh, EmbreeMode::Single, embree_high),
+                    (Engine::EmbreePacketHigh, EmbreeMode::Packet16, embree_high),
                 ] {
                     let swapped = library_with_embree(library, embree.clone(), mode)
                         .map_err(|e| Failure::Run(e.message))?;
-                    for workload in [2, 3] {
+                    // The high-quality scene is for the set-up tables: its
+                    // trace rate (WORKLOAD1) and WORKLOAD2's first image.
+                    let workloads: &[u32] = if engine.high_quality() { &[2] } else { &[2, 3] };
+                    for &workload in workloads {
                         let Some(path) = path_of(workload) else {
                             continue;
                         };
@@ -746,6 +797,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
     progress.finish_and_clear();
 
     let report = Report {
+        workload2_compile_ms,
         cpu: cpu_model(),
         gpu: gpu.map(GpuInfo::of),
         threads,
@@ -980,12 +1032,16 @@ fn measure(
     };
     let mut measurement = Measurement {
         frames_ms: Vec::new(),
+        first_frame_ms: 0.0,
         stages: Vec::new(),
         profiled_frames_ms: Vec::new(),
     };
     let mut prims = None;
     for round in 0..args.warmup + args.rounds {
         let (result, elapsed) = frame(false)?;
+        if round == 0 {
+            measurement.first_frame_ms = ms(elapsed);
+        }
         if round < args.warmup {
             give_back_outputs(result, gpu, &frame_pool);
             continue;
@@ -1192,6 +1248,7 @@ mod tests {
     fn agreement_needs_equal_hit_counts_and_ids() {
         let m = Measurement {
             frames_ms: vec![1.0],
+            first_frame_ms: 1.0,
             stages: vec![],
             profiled_frames_ms: vec![],
         };

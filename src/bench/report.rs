@@ -70,6 +70,8 @@ pub struct Report {
     pub rounds: u32,
     /// Embree's triangle test, when Embree ran.
     pub embree_test: Option<super::EmbreeTest>,
+    /// Compiling WORKLOAD2's fused plan, part of its time to first image.
+    pub workload2_compile_ms: Option<f64>,
     pub scenes: Vec<SceneResult>,
 }
 
@@ -96,6 +98,10 @@ impl Report {
             .flat_map(|s| &s.views)
             .flat_map(|v| &v.workloads)
             .any(|w| w.workload == workload)
+    }
+
+    fn has_embree_builds(&self) -> bool {
+        self.scenes.iter().any(|s| s.embree_build_ms.is_some())
     }
 
     fn has_engines(&self) -> bool {
@@ -205,6 +211,135 @@ impl Report {
         md.push('\n');
     }
 
+    /// Each BVH's build time beside its trace rate: WORKLOAD1's
+    /// `map<intersect>` over the views, with dpp's traversal of its own BVH
+    /// and with Embree's single rays and packets on each of its two scenes.
+    fn write_bvh_builds(&self, md: &mut String) {
+        let _ = writeln!(md, "## BVH builds and their trace rates\n");
+        let embree = if self.has_embree_builds() {
+            "; Embree: copying the mesh into its buffers and `rtcCommitScene`, at its default quality, `RTC_BUILD_QUALITY_MEDIUM`, and at `RTC_BUILD_QUALITY_HIGH`"
+        } else {
+            ""
+        };
+        let _ = writeln!(md, "Build: the BVH of the loaded mesh (dpp: obvhs's PLOC build and our flattening{embree}). Trace rate: WORKLOAD1's primary rays over its `map<intersect>` stage (unfused plan), mean over the views, with that BVH behind `intersect`.\n");
+        let _ = writeln!(
+            md,
+            "| scene | BVH | build ms | build / dpp's | `map<intersect>` Mrays/s | rate / dpp's |"
+        );
+        let _ = writeln!(md, "| --- | --- | ---: | ---: | ---: | ---: |");
+        for scene in &self.scenes {
+            let rate = |intersect_ms: &dyn Fn(&super::ViewResult) -> Option<f64>| {
+                let rates: Vec<f64> = (scene.views.iter())
+                    .filter_map(|view| intersect_ms(view).map(|t| mrays(view.rays, t)))
+                    .collect();
+                (!rates.is_empty()).then(|| mean(&rates))
+            };
+            let own_rate = rate(&|view| view.workload1_intersect_ms());
+            let mut row = |bvh: &str, build: Option<f64>, rate: Option<f64>| {
+                let ratio = |value: Option<f64>, own: Option<f64>| match (value, own) {
+                    (Some(value), Some(own)) => format!("{:.2}", value / own),
+                    _ => "–".into(),
+                };
+                let _ = writeln!(
+                    md,
+                    "| {} | {bvh} | {} | {} | {} | {} |",
+                    scene.name,
+                    build.map_or("–".into(), |v| format!("{v:.1}")),
+                    ratio(build, Some(scene.bvh_ms)),
+                    rate.map_or("–".into(), |v| format!("{v:.2}")),
+                    ratio(rate, own_rate),
+                );
+            };
+            row("dpp (obvhs PLOC)", Some(scene.bvh_ms), own_rate);
+            for (engine, bvh, build) in [
+                (
+                    Engine::EmbreeSingle,
+                    "Embree default, single rays",
+                    scene.embree_build_ms,
+                ),
+                (
+                    Engine::EmbreePacket,
+                    "Embree default, 16-ray packets",
+                    scene.embree_build_ms,
+                ),
+                (
+                    Engine::EmbreeSingleHigh,
+                    "Embree high, single rays",
+                    scene.embree_high_build_ms,
+                ),
+                (
+                    Engine::EmbreePacketHigh,
+                    "Embree high, 16-ray packets",
+                    scene.embree_high_build_ms,
+                ),
+            ] {
+                if build.is_some() {
+                    row(
+                        bvh,
+                        build,
+                        rate(&|view| view.engine_workload1_intersect_ms(engine)),
+                    );
+                }
+            }
+        }
+        md.push('\n');
+    }
+
+    /// WORKLOAD2's time to first image on each scene's first view: what
+    /// `dpp run` does before its first image is in memory, part by part, with
+    /// dpp's BVH and with each of Embree's behind `intersect` (16-ray packets).
+    fn write_time_to_first_image(&self, md: &mut String) {
+        let _ = writeln!(md, "## Time to first image: WORKLOAD2\n");
+        let embree = if self.has_embree_builds() {
+            "; with Embree, its BVH instead of dpp's and its 16-ray packets behind `intersect`, the rest the same"
+        } else {
+            ""
+        };
+        let _ = writeln!(md, "Compiling the fused plan, loading the mesh, its vertex normals, the BVH and the first fused frame on the first view (no arrays of an earlier frame to reuse){embree}. Last column: the time to first image over dpp's.\n");
+        let _ = writeln!(md, "| scene | view | BVH | compile ms | load ms | normals ms | BVH ms | first frame ms | time to first image ms | / dpp's |");
+        let _ = writeln!(
+            md,
+            "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+        );
+        let compile = self.workload2_compile_ms.unwrap_or(0.0);
+        for scene in &self.scenes {
+            let Some(view) = scene.views.first() else {
+                continue;
+            };
+            let Some(own) = view.workloads.iter().find(|w| w.workload == 2) else {
+                continue;
+            };
+            let shared = compile + scene.load_ms + scene.normals_ms;
+            let own_total = shared + scene.bvh_ms + own.fused.first_frame_ms;
+            let mut row = |bvh: &str, build: f64, frame: f64| {
+                let total = shared + build + frame;
+                let _ = writeln!(
+                    md,
+                    "| {} | {} | {bvh} | {compile:.1} | {:.1} | {:.1} | {build:.1} | {frame:.1} | {total:.1} | {:.2} |",
+                    scene.name, view.view, scene.load_ms, scene.normals_ms, total / own_total
+                );
+            };
+            row("dpp", scene.bvh_ms, own.fused.first_frame_ms);
+            for (engine, bvh, build) in [
+                (
+                    Engine::EmbreePacket,
+                    "Embree default",
+                    scene.embree_build_ms,
+                ),
+                (
+                    Engine::EmbreePacketHigh,
+                    "Embree high",
+                    scene.embree_high_build_ms,
+                ),
+            ] {
+                if let (Some(build), Some(frame)) = (build, view.engine_frame(2, engine)) {
+                    row(bvh, build, frame.first_frame_ms);
+                }
+            }
+        }
+        md.push('\n');
+    }
+
     pub fn markdown(&self) -> String {
         let mut md = String::new();
         let (width, height) = self.size;
@@ -243,7 +378,7 @@ impl Report {
         }
 
         let _ = writeln!(md, "## Scenes\n");
-        let embree = self.scenes.iter().any(|s| s.embree_build_ms.is_some());
+        let embree = self.has_embree_builds();
         let _ = writeln!(
             md,
             "| scene | triangles | load ms | normals ms | BVH build ms |{}",
@@ -272,6 +407,10 @@ impl Report {
             md.push('\n');
         }
         md.push('\n');
+        self.write_bvh_builds(&mut md);
+        if self.has_workload(2) {
+            self.write_time_to_first_image(&mut md);
+        }
 
         if self.has_workload(1) {
             let _ = writeln!(md, "## WORKLOAD1 (primary rays), Mrays/s\n");
@@ -487,6 +626,7 @@ impl Report {
         let measurement = |m: &Measurement, rays: Option<u64>| {
             let mut value = json!({
                 "frames_ms": m.frames_ms,
+                "first_frame_ms": m.first_frame_ms,
                 "mean_frame_ms": m.mean_ms(),
                 "fps": m.fps(),
                 "stages": m.stages.iter().map(|s| json!({
@@ -585,6 +725,7 @@ impl Report {
                     "normals_ms": scene.normals_ms,
                     "bvh_build_ms": scene.bvh_ms,
                     "embree_build_ms": scene.embree_build_ms,
+                    "embree_high_build_ms": scene.embree_high_build_ms,
                     "views": views,
                 })
             })
@@ -596,6 +737,7 @@ impl Report {
             "size": [self.size.0, self.size.1],
             "warmup_rounds": self.warmup,
             "measured_rounds": self.rounds,
+            "workload2_compile_ms": self.workload2_compile_ms,
             // The name `--embree-test` takes.
             "embree_test": self
                 .embree_test

@@ -89,6 +89,8 @@ fn a_tiny_bench_writes_tables_json_and_a_chart() {
         "## WORKLOAD1 (primary rays), Mrays/s",
         "## WORKLOAD2 and WORKLOAD3, frames per second",
         "## Time per stage",
+        "## BVH builds and their trace rates",
+        "## Time to first image: WORKLOAD2",
     ] {
         assert!(markdown.contains(heading), "{heading} missing:\n{markdown}");
     }
@@ -150,6 +152,17 @@ fn a_tiny_bench_writes_tables_json_and_a_chart() {
     }
     assert!(w1["unfused"]["intersect_mrays_per_s"].as_f64().unwrap() > 0.0);
     assert!(w1["fused"]["frame_mrays_per_s"].as_f64().unwrap() > 0.0);
+    // Time to first image: WORKLOAD2's parts add up to the table's total.
+    let part = |value: &serde_json::Value| value.as_f64().unwrap();
+    let total = part(&json["workload2_compile_ms"])
+        + part(&scene["load_ms"])
+        + part(&scene["normals_ms"])
+        + part(&scene["bvh_build_ms"])
+        + part(&workloads[1]["fused"]["first_frame_ms"]);
+    let row = (markdown.lines())
+        .find(|l| l.starts_with("| builtin:16 | front | dpp |"))
+        .unwrap();
+    assert!(row.ends_with(&format!("| {total:.1} | 1.00 |")), "{row}");
     assert_eq!(w1["fused"]["frames_ms"].as_array().unwrap().len(), 1);
     assert!(w1["unfused"]["stages"].as_array().unwrap().len() > 3);
     // The JSON has the same op split: one entry per op of the stage.
@@ -338,7 +351,23 @@ fn an_embree_bench_compares_every_workload() {
     assert_eq!(json["embree_test"], "robust");
     let view = &json["scenes"][0]["views"][0];
     let engines = view["engines"].as_array().unwrap();
-    assert_eq!(engines.len(), 2);
+    assert_eq!(engines.len(), 4);
+    // Embree's BVH at both qualities: each build timed, each traced.
+    let scene = &json["scenes"][0];
+    for build in ["embree_build_ms", "embree_high_build_ms"] {
+        assert!(scene[build].as_f64().unwrap() > 0.0, "{build}");
+    }
+    for heading in ["| dpp (obvhs PLOC) |", "| Embree high, 16-ray packets |"] {
+        assert!(markdown.contains(heading), "{heading} missing:\n{markdown}");
+    }
+    // Time to first image: a row for dpp and for each of Embree's BVHs.
+    for bvh in [
+        "| front | dpp |",
+        "| front | Embree default |",
+        "| front | Embree high |",
+    ] {
+        assert_eq!(markdown.matches(bvh).count(), 1, "{bvh}:\n{markdown}");
+    }
     assert!(engines.iter().all(|e| e["agree"] == true), "{engines:?}");
     let traced = view["engine_frames"].as_array().unwrap();
     let runs: Vec<(u64, &str)> = traced
@@ -354,7 +383,9 @@ fn an_embree_bench_compares_every_workload() {
             (2, "embree-single"),
             (3, "embree-single"),
             (2, "embree-packet"),
-            (3, "embree-packet")
+            (3, "embree-packet"),
+            (2, "embree-single-high"),
+            (2, "embree-packet-high"),
         ]
     );
     for engine in traced {

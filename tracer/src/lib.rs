@@ -12,6 +12,7 @@ pub mod mesh_write;
 pub mod obj;
 pub mod partition;
 pub mod ply;
+mod ply_body;
 mod prefetch;
 pub mod scene;
 pub mod shading;

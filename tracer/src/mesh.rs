@@ -2,6 +2,7 @@
 
 use crate::vector::unit_or_zero;
 use glam::Vec3;
+use rayon::prelude::*;
 use std::collections::HashMap;
 use thiserror::Error;
 
@@ -186,64 +187,134 @@ impl TriangleMesh {
     /// Around a vertex with more than [`MAX_DIRECTIONS_AROUND_A_VERTEX`]
     /// different face directions, corners keep their face's normal.
     pub fn add_crease_normals(&mut self, crease: f32) {
+        self.add_crease_normals_in_runs(crease, VERTICES_PER_NORMAL_RUN);
+    }
+
+    /// [`TriangleMesh::add_crease_normals`] with the vertices smoothed in
+    /// parallel runs of `run_length` (the result does not depend on it).
+    fn add_crease_normals_in_runs(&mut self, crease: f32, run_length: usize) {
         let faces: Vec<Vec3> = (0..self.triangles.len())
+            .into_par_iter()
             .map(|t| self.face_normal(t))
             .collect();
-        let units: Vec<Vec3> = faces.iter().map(|&n| unit_or_zero(n)).collect();
+        let units: Vec<Vec3> = faces.par_iter().map(|&n| unit_or_zero(n)).collect();
         let cos_crease = crease.cos();
-        // The corners around each vertex, as (triangle, corner) pairs in CSR form.
-        let mut starts = vec![0usize; self.positions.len() + 1];
+        let vertex_count = self.positions.len();
+        // The corners around each vertex, as (triangle, corner) pairs in CSR
+        // form (a counting sort, which keeps each vertex's corners in triangle
+        // order); and where each corner landed, to find its new vertex again.
+        let mut starts = vec![0usize; vertex_count + 1];
         for triangle in &self.triangles {
             for &vertex in triangle {
                 starts[vertex as usize + 1] += 1;
             }
         }
-        for i in 0..self.positions.len() {
+        for i in 0..vertex_count {
             starts[i + 1] += starts[i];
         }
         let mut fill = starts.clone();
-        let mut corners = vec![(0u32, 0u8); starts[self.positions.len()]];
+        let mut corners = vec![(0u32, 0u8); starts[vertex_count]];
+        let mut slot_of_corner = vec![0u32; 3 * self.triangles.len()];
         for (t, triangle) in self.triangles.iter().enumerate() {
             for (c, &vertex) in triangle.iter().enumerate() {
                 corners[fill[vertex as usize]] = (t as u32, c as u8);
+                slot_of_corner[3 * t + c] = fill[vertex as usize] as u32;
                 fill[vertex as usize] += 1;
             }
         }
-        let mut positions = Vec::with_capacity(self.positions.len());
-        let mut scalars = self
-            .scalars
-            .as_ref()
-            .map(|_| Vec::with_capacity(self.positions.len()));
-        let mut normals = Vec::with_capacity(self.positions.len());
-        let mut triangles = self.triangles.clone();
-        let mut directions = DirectionsAroundVertex::default();
-        for vertex in 0..self.positions.len() {
-            let around = &corners[starts[vertex]..starts[vertex + 1]];
-            directions.smooth(
-                around
-                    .iter()
-                    .map(|&(t, _)| (units[t as usize], faces[t as usize])),
-                cos_crease,
-            );
-            // One new vertex per distinct normal, in the order of the corners.
-            let first_new = normals.len() as u32;
-            for &normal in &directions.distinct_normals {
-                positions.push(self.positions[vertex]);
-                if let (Some(new), Some(old)) = (scalars.as_mut(), self.scalars.as_ref()) {
-                    new.push(old[vertex]);
-                }
-                normals.push(normal);
-            }
-            for (&(t, c), &group) in around.iter().zip(&directions.corner_group) {
-                triangles[t as usize][c as usize] =
-                    first_new + directions.distinct_of_group[group as usize];
-            }
+        drop(fill);
+        // Vertices in fixed-size runs, each smoothed on its own: a vertex's
+        // new vertices depend only on its own corners, so the runs' results,
+        // concatenated in order, are what one pass over all vertices gives.
+        let runs: Vec<std::ops::Range<usize>> = (0..vertex_count)
+            .step_by(run_length)
+            .map(|first| first..(first + run_length).min(vertex_count))
+            .collect();
+        // Each corner's new vertex, in CSR order, split at the runs' corners.
+        let mut new_vertex_of_slot = vec![0u32; corners.len()];
+        let mut slots_of_run = Vec::with_capacity(runs.len());
+        let mut rest = &mut new_vertex_of_slot[..];
+        for run in &runs {
+            let (own, after) = rest.split_at_mut(starts[run.end] - starts[run.start]);
+            slots_of_run.push(own);
+            rest = after;
         }
-        self.positions = positions;
-        self.scalars = scalars;
+        let smoothed: Vec<SmoothedRun> = runs
+            .par_iter()
+            .zip(slots_of_run.par_iter_mut())
+            .map(|(run, slots)| {
+                let mut directions = DirectionsAroundVertex::default();
+                let mut smoothed = SmoothedRun::default();
+                let first_slot = starts[run.start];
+                for vertex in run.clone() {
+                    let around = &corners[starts[vertex]..starts[vertex + 1]];
+                    directions.smooth(
+                        around
+                            .iter()
+                            .map(|&(t, _)| (units[t as usize], faces[t as usize])),
+                        cos_crease,
+                    );
+                    // One new vertex per distinct normal, in the order of the corners.
+                    let first_new = smoothed.normals.len() as u32;
+                    for &normal in &directions.distinct_normals {
+                        smoothed.old_vertex.push(vertex as u32);
+                        smoothed.normals.push(normal);
+                    }
+                    let own_slots = &mut slots[starts[vertex] - first_slot..][..around.len()];
+                    for (slot, &group) in own_slots.iter_mut().zip(&directions.corner_group) {
+                        *slot = first_new + directions.distinct_of_group[group as usize];
+                    }
+                }
+                smoothed
+            })
+            .collect();
+        // Run-local vertex numbers become global ones.
+        let mut first_of_run = Vec::with_capacity(smoothed.len());
+        let mut new_vertices = 0u32;
+        for run in &smoothed {
+            first_of_run.push(new_vertices);
+            new_vertices += run.normals.len() as u32;
+        }
+        slots_of_run
+            .par_iter_mut()
+            .zip(&first_of_run)
+            .for_each(|(slots, &first)| slots.iter_mut().for_each(|slot| *slot += first));
+        let old_vertex: Vec<u32> = smoothed
+            .iter()
+            .flat_map(|run| run.old_vertex.iter().copied())
+            .collect();
+        let normals: Vec<Vec3> = smoothed.into_iter().flat_map(|run| run.normals).collect();
+        let (old_positions, old_scalars) =
+            (std::mem::take(&mut self.positions), self.scalars.take());
+        self.positions = old_vertex
+            .par_iter()
+            .map(|&v| old_positions[v as usize])
+            .collect();
+        self.scalars =
+            old_scalars.map(|old| old_vertex.par_iter().map(|&v| old[v as usize]).collect());
+        self.triangles
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(t, triangle)| {
+                for (c, vertex) in triangle.iter_mut().enumerate() {
+                    *vertex = new_vertex_of_slot[slot_of_corner[3 * t + c] as usize];
+                }
+            });
         self.normals = Some(normals);
-        self.triangles = triangles;
     }
+}
+
+/// Vertices smoothed by one task of [`TriangleMesh::add_crease_normals`]: enough
+/// that a task outweighs its scheduling, few enough for two threads to share
+/// a 100K-vertex mesh evenly.
+const VERTICES_PER_NORMAL_RUN: usize = 4096;
+
+/// The new vertices of one run of old ones, in order: the old vertex each
+/// copies its position and scalar from, and its normal.
+#[derive(Default)]
+struct SmoothedRun {
+    old_vertex: Vec<u32>,
+    normals: Vec<Vec3>,
 }
 
 /// Around a vertex with more distinct face directions than this, each corner
@@ -506,6 +577,28 @@ mod tests {
             triangles,
             normals: None,
             scalars: None,
+        }
+    }
+
+    #[test]
+    fn crease_normals_do_not_depend_on_how_the_vertices_are_split_into_runs() {
+        // A capped cone (its rim vertices split in two) beside a cube (its
+        // corners split in three), with a scalar per vertex to carry along.
+        let mut mesh = cone(500, true);
+        let first_corner = mesh.positions.len() as u32;
+        let cube = cube();
+        mesh.positions
+            .extend(cube.positions.iter().map(|&p| p + 3.0 * Vec3::X));
+        (mesh.triangles).extend(cube.triangles.iter().map(|t| t.map(|v| v + first_corner)));
+        mesh.scalars = Some((0..mesh.positions.len()).map(|v| v as f32).collect());
+        let crease = 30f32.to_radians();
+        let mut whole = mesh.clone();
+        whole.add_crease_normals_in_runs(crease, mesh.positions.len());
+        assert!(whole.positions.len() > mesh.positions.len());
+        for run_length in [1, 3, 64, VERTICES_PER_NORMAL_RUN] {
+            let mut split = mesh.clone();
+            split.add_crease_normals_in_runs(crease, run_length);
+            assert_eq!(split, whole, "runs of {run_length} vertices");
         }
     }
 

@@ -23,8 +23,8 @@ use crate::functors::{write_hits, RayColumns};
 use crate::mesh::{MeshError, TriangleMesh};
 use dpp_runtime::{ClosureFunctor, Column, ColumnView, Functor, FunctorError, FunctorLibrary};
 use embree3::{
-    BufferUsage, Device, Format, GeometryKind, Hit16, IntersectContext, Ray, Ray16, RayHit,
-    RayHit16, Scene, SceneFlags, SoAHit, SoARay, ValidMask, ValidMaskN, INVALID_ID,
+    BufferUsage, BuildQuality, Device, Format, GeometryKind, Hit16, IntersectContext, Ray, Ray16,
+    RayHit, RayHit16, Scene, SceneFlags, SoAHit, SoARay, ValidMask, ValidMaskN, INVALID_ID,
 };
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -72,12 +72,30 @@ impl std::fmt::Debug for EmbreeScene {
     }
 }
 
+/// The quality of Embree's BVH build (`rtcSetSceneBuildQuality`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EmbreeQuality {
+    /// `RTC_BUILD_QUALITY_MEDIUM`, Embree's default.
+    Default,
+    /// `RTC_BUILD_QUALITY_HIGH`: a slower build of a faster BVH.
+    High,
+}
+
 impl EmbreeScene {
     /// Copies the mesh into Embree's buffers and builds its BVH (default
     /// quality). `robust`: Embree's watertight triangle test
     /// (`RTC_SCENE_FLAG_ROBUST`), like ours; otherwise its default, faster
     /// test, which lets a few rays through the edges two triangles share.
     pub fn build(mesh: &TriangleMesh, robust: bool) -> Result<EmbreeScene, EmbreeError> {
+        EmbreeScene::build_at(mesh, robust, EmbreeQuality::Default)
+    }
+
+    /// [`EmbreeScene::build`] at the given build quality.
+    pub fn build_at(
+        mesh: &TriangleMesh,
+        robust: bool,
+        quality: EmbreeQuality,
+    ) -> Result<EmbreeScene, EmbreeError> {
         mesh.validate()?;
         let failed = |what: &str, error: embree3::Error| {
             EmbreeError::Embree(format!("{what} failed ({error:?})"))
@@ -115,6 +133,9 @@ impl EmbreeScene {
             .map_err(|e| failed("creating a scene", e))?;
         if robust {
             scene.set_flags(SceneFlags::ROBUST);
+        }
+        if quality == EmbreeQuality::High {
+            scene.set_build_quality(BuildQuality::HIGH);
         }
         scene.attach_geometry(&geometry);
         scene.commit();
