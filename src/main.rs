@@ -17,6 +17,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use dpp_gpu::{run_plan_gpu_observed, GpuContext, GpuRunContext};
 use dpp_runtime::compile::plan_text::plan_to_text;
 use dpp_runtime::cpu::column_pool::ColumnPool;
+use dpp_runtime::cpu::compiled::Elementwise;
 use dpp_runtime::cpu::exec::{run_plan_observed, RunContext};
 use dpp_runtime::interpret::{
     listed_op_shares, OutputValue, RunError, RunHooks, StageStart, StageTiming,
@@ -190,6 +191,9 @@ struct RunArgs {
     threads: Option<usize>,
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     backend: Backend,
+    /// How the CPU backend runs a fused stage's element-wise ops.
+    #[arg(long, value_enum, default_value_t = CpuElementwise::Compiled)]
+    cpu_elementwise: CpuElementwise,
     /// Under mpirun: each rank holds part of the data (`data`, the default) or
     /// renders part of the image with all of the data (`image`).
     #[arg(long, value_enum, default_value_t = distributed::Decompose::Data)]
@@ -214,6 +218,25 @@ pub(crate) enum Backend {
     Cpu,
     /// wgpu on the first adapter found (`WGPU_BACKEND=vulkan|metal|dx12|gl` chooses).
     Gpu,
+}
+
+/// How the CPU backend runs a fused stage's element-wise ops (the maps of
+/// generic functors, fills, iotas, fields and gathers between other ops).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(crate) enum CpuElementwise {
+    /// Each run of them compiled into one machine-code loop (Cranelift).
+    Compiled,
+    /// One op at a time over chunk-sized columns.
+    Columns,
+}
+
+impl From<CpuElementwise> for Elementwise {
+    fn from(choice: CpuElementwise) -> Elementwise {
+        match choice {
+            CpuElementwise::Compiled => Elementwise::Compiled,
+            CpuElementwise::Columns => Elementwise::Columns,
+        }
+    }
 }
 
 #[derive(clap::Args)]
@@ -517,6 +540,7 @@ fn run_on(
                 resources: scene.resources(),
                 chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
                 column_pool: &ColumnPool::new(),
+                elementwise: args.cpu_elementwise.into(),
             };
             progress.phase(format!("running {}", plan.pipeline));
             let run_start = Instant::now();

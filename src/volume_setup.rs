@@ -160,6 +160,7 @@ pub fn isosurface_triangles(
         resources: &resources,
         chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
         column_pool: &ColumnPool::new(),
+        elementwise: dpp_runtime::cpu::compiled::Elementwise::default(),
     };
     let result = run_plan(&plan, &context).map_err(|e| format!("error: isosurface: {e}"))?;
     let array = |name: &str| match result.outputs.iter().find(|(n, _)| n == name) {

@@ -664,6 +664,7 @@ impl Backend for GpuBackend<'_> {
         Ok(StageMeasurement {
             device_time: time,
             op_thread_times: Vec::new(),
+            compiled: Vec::new(),
         })
     }
 

@@ -12,6 +12,7 @@ use crate::error::ErrorKind;
 use crate::functor::FunctorError;
 use crate::host::{HostValue, Uniforms};
 use crate::types::{ElemType, RecordRegistry};
+use std::ops::Range;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -45,6 +46,10 @@ pub struct StageTiming {
     /// one for storing its element-wise values if it stores any); empty where
     /// it cannot (a GPU stage is one kernel).
     pub ops: Vec<OpTiming>,
+    /// Runs of the stage's ops that ran as one compiled loop (the CPU
+    /// backend's `cpu::compiled`), by position: the time of each is its
+    /// first op's, and the other ops of the run are unlabelled.
+    pub compiled: Vec<Range<usize>>,
 }
 
 /// Time the chunks of a stage spent in one of its ops, summed over the threads
@@ -59,10 +64,15 @@ pub struct OpTiming {
 
 /// The ops of a stage's profile worth listing apart, each with its share of
 /// the stage's op time: none for a stage of one op that stores nothing (or
-/// one never timed), and no field views (`.field`: they copy nothing).
+/// one never timed), no field views (`.field`: they copy nothing) and none
+/// of the ops a compiled run's first op stands for.
 pub fn listed_op_shares(ops: &[OpTiming]) -> Vec<(&OpTiming, f64)> {
     let total: f64 = ops.iter().map(|op| op.thread_time.as_secs_f64()).sum();
-    let listed: Vec<&OpTiming> = ops.iter().filter(|op| !op.label.starts_with('.')).collect();
+    // Unlabelled: inside a compiled run, whose first op took the time.
+    let listed: Vec<&OpTiming> = ops
+        .iter()
+        .filter(|op| !op.label.starts_with('.') && !op.label.is_empty())
+        .collect();
     if listed.len() < 2 || total <= 0.0 {
         return Vec::new();
     }
@@ -108,6 +118,8 @@ pub struct StageMeasurement {
     /// the stage stores element-wise values, the time spent copying them into
     /// their arrays; empty where the backend cannot split a stage.
     pub op_thread_times: Vec<Duration>,
+    /// Runs of ops that ran as one compiled loop, by position in the stage.
+    pub compiled: Vec<Range<usize>>,
 }
 
 #[derive(Clone, Debug)]
@@ -381,6 +393,7 @@ pub fn interpret_observed<B: Backend>(
                 elements: 0,
                 time: Duration::ZERO,
                 ops: Vec::new(),
+                compiled: Vec::new(),
             })
             .collect(),
         stages,
@@ -530,6 +543,13 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                         if measured.op_thread_times.len() > stage.ops.len() {
                             labels.push(store_label(self.plan, stage));
                         }
+                        for run in &measured.compiled {
+                            let (first, last) = (&labels[run.start], &labels[run.end - 1]);
+                            labels[run.start] =
+                                format!("compiled[{}]: {first} … {last}", run.len());
+                            labels[run.start + 1..run.end].fill(String::new());
+                        }
+                        timing.compiled = measured.compiled.clone();
                         timing.ops = labels
                             .into_iter()
                             .map(|label| OpTiming {

@@ -99,6 +99,7 @@ pub fn bench_across_ranks(
                         resources: &view.resources,
                         chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
                         column_pool: &ColumnPool::new(),
+                        elementwise: dpp_runtime::cpu::compiled::Elementwise::default(),
                     };
                     let mut measured = Duration::ZERO;
                     for round in 0..args.warmup + args.rounds {

@@ -130,6 +130,9 @@ pub struct BenchArgs {
     /// offers once for the whole bench (`WGPU_BACKEND`, `WGPU_ADAPTER_NAME` choose).
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     backend: Backend,
+    /// How the CPU backend runs a fused stage's element-wise ops.
+    #[arg(long, value_enum, default_value_t = crate::CpuElementwise::Compiled)]
+    cpu_elementwise: crate::CpuElementwise,
     /// Intersection engines: `dpp`, or `dpp,embree` to compare WORKLOAD1 and
     /// WORKLOAD3 with Embree 3 behind `intersect` (and `occluded`) (needs a
     /// build with `--features embree`; CPU backend only).
@@ -1011,6 +1014,7 @@ fn measure(
                     resources: &view.resources,
                     chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
                     column_pool: &frame_pool,
+                    elementwise: args.cpu_elementwise.into(),
                 };
                 pool.install(|| run_plan(plan, &context))
             }

@@ -86,6 +86,7 @@ pub(super) fn bench_volume(
                 resources: &view.resources,
                 chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
                 column_pool: &ColumnPool::new(),
+                elementwise: dpp_runtime::cpu::compiled::Elementwise::default(),
             };
             let result = pool
                 .install(|| run_plan(&fused, &context))

@@ -904,6 +904,7 @@ fn run_cpu(setup: &Setup, plan: &Plan, data: &Data) -> Result<RunResult, RunErro
         resources: data,
         chunk: DEFAULT_CHUNK,
         column_pool: &ColumnPool::new(),
+        elementwise: dpp_runtime::cpu::compiled::Elementwise::default(),
     };
     run_plan(plan, &context)
 }

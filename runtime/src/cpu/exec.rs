@@ -5,6 +5,7 @@
 //! its ops, so a fused stage's profile still says where its time went.
 
 use super::column_pool::{ColumnPool, Contents};
+use super::compiled::{self, Elementwise, PreparedSegment};
 use super::kernels::{self, ScanTotal};
 use super::shared_scatter::{Claimed, Owners, ScatterClaims, SharedTarget};
 use super::sort::SortedOrder;
@@ -33,6 +34,8 @@ pub struct RunContext<'a> {
     /// Where the run's large arrays come from and go back to; a caller that
     /// runs many frames keeps one pool for all of them.
     pub column_pool: &'a ColumnPool,
+    /// Whether runs of element-wise ops are compiled into one loop each.
+    pub elementwise: Elementwise,
 }
 
 /// Runs `plan` on the CPU.
@@ -77,7 +80,7 @@ impl Backend for CpuBackend<'_> {
         call: &StageCall<'_>,
         slots: &mut Slots<Arc<Column>>,
     ) -> Result<StageMeasurement, RunError> {
-        let op_thread_times = StageRun {
+        let (op_thread_times, compiled) = StageRun {
             call,
             context: self.context,
             slots,
@@ -86,6 +89,7 @@ impl Backend for CpuBackend<'_> {
         Ok(StageMeasurement {
             device_time: None,
             op_thread_times,
+            compiled,
         })
     }
 
@@ -176,8 +180,8 @@ impl StageRun<'_, '_> {
     }
 
     /// Runs the stage; returns the time its chunks spent in each op, summed
-    /// over the threads.
-    fn run(&mut self) -> Result<Vec<Duration>, RunError> {
+    /// over the threads, and the runs of ops it ran compiled.
+    fn run(&mut self) -> Result<(Vec<Duration>, Vec<Range<usize>>), RunError> {
         let stage = self.call.stage;
         let head = &stage.ops[0];
         let host_values = &self.call.host_values;
@@ -208,8 +212,12 @@ impl StageRun<'_, '_> {
                 (var, SharedTarget::new(array))
             })
             .collect();
+        let segments = match self.context.elementwise {
+            Elementwise::Compiled => compiled::prepare(self.call),
+            Elementwise::Columns => Vec::new(),
+        };
         let results = kernels::run_chunked(len, chunk, |range| {
-            self.run_chunk(stage, host_values, &direct, &materialised, range)
+            self.run_chunk(stage, host_values, &segments, &direct, &materialised, range)
         })
         .into_iter()
         .collect::<Result<Vec<_>, RunError>>()?;
@@ -243,7 +251,12 @@ impl StageRun<'_, '_> {
                 None => self.finish_sink(op, sink_values, &results, number)?,
             }
         }
-        Ok(op_times)
+        let compiled = segments
+            .iter()
+            .flatten()
+            .map(|prepared| prepared.segment.ops.clone())
+            .collect();
+        Ok((op_times, compiled))
     }
 
     /// Binds `var` to `column`, giving the array it held back to the pool.
@@ -555,6 +568,7 @@ impl StageRun<'_, '_> {
         &self,
         stage: &Stage,
         host_values: &[OpHostValues],
+        segments: &[Option<PreparedSegment>],
         direct: &DirectScatters,
         materialised: &[(VarId, SharedTarget)],
         range: Range<usize>,
@@ -576,11 +590,40 @@ impl StageRun<'_, '_> {
         // start of op `i + 1` (or the end of the loop), whichever way it ends.
         let mut op_times = vec![Duration::ZERO; stage.ops.len()];
         let mut op_start = Instant::now();
+        // Ops before this one were computed by a compiled segment (whose
+        // time is its first op's).
+        let mut computed_until = 0;
         for (number, (op, values)) in stage.ops.iter().zip(host_values).enumerate() {
             if number > 0 {
                 let now = Instant::now();
                 op_times[number - 1] = now - op_start;
                 op_start = now;
+            }
+            if number < computed_until {
+                continue;
+            }
+            if let Some(Some(prepared)) = segments.get(number) {
+                let segment = &prepared.segment;
+                let inputs: Vec<ChunkValue> = segment
+                    .elementwise_inputs()
+                    .map(|v| lookup(&locals, v))
+                    .collect::<Result<_, _>>()?;
+                let views: Vec<ColumnView> = inputs.iter().map(|c| c.view(&range)).collect();
+                let gathered: Vec<&Arc<Column>> = segment
+                    .gathered_inputs()
+                    .map(|v| self.array(v))
+                    .collect::<Result<_, _>>()?;
+                let gathered: Vec<ColumnView> = gathered.iter().map(|c| c.view()).collect();
+                // `None`: an element failed; the ops below run one by one and say why.
+                if let Some(outputs) =
+                    prepared.run(&views, &gathered, range.start, range.len(), records)
+                {
+                    for ((var, _), column) in segment.outputs.iter().zip(outputs) {
+                        locals.push((*var, ChunkValue::Chunk(Arc::new(column))));
+                    }
+                    computed_until = segment.ops.end;
+                    continue;
+                }
             }
             let functor_context = |first_index: usize| CallContext {
                 named: &values.named,

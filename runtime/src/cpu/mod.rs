@@ -1,4 +1,5 @@
 pub mod column_pool;
+pub mod compiled;
 pub mod exec;
 pub mod kernels;
 mod shared_scatter;

@@ -117,6 +117,7 @@ pub fn run(plan: &Plan, library: &FunctorLibrary) -> Result<String, String> {
         resources: &(),
         chunk: 64,
         column_pool: &ColumnPool::new(),
+        elementwise: dpp_runtime::cpu::compiled::Elementwise::default(),
     };
     let result = run_plan(plan, &context).map_err(|e| e.message)?;
     Ok(result

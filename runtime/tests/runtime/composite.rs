@@ -39,6 +39,7 @@ fn run_with(plan: &Plan, compositor: &dyn Compositor) -> Result<RunResult, RunEr
         resources: &(),
         chunk: 64,
         column_pool: &ColumnPool::new(),
+        elementwise: dpp_runtime::cpu::compiled::Elementwise::default(),
     };
     let hooks = RunHooks {
         observer: None,

@@ -4,6 +4,7 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+mod compiled;
 mod composite;
 mod diagnostics;
 mod generic_functors;

@@ -572,6 +572,7 @@ fn lengths_that_do_not_fold_are_checked_when_the_plan_runs() {
         resources: &(),
         chunk: 64,
         column_pool: &ColumnPool::new(),
+        elementwise: dpp_runtime::cpu::compiled::Elementwise::default(),
     };
     let error = run_plan(&compile(source, &library).unwrap(), &context).unwrap_err();
     insta::assert_snapshot!(error.message, @"stage 2 [iota → map<add>]: length mismatch: `%2` has 5 elements, but the stage runs over 4");

@@ -78,6 +78,7 @@ fn run_on(volume: &Volume, level: f64, fuse: bool, backend: Backend) -> Run {
                 resources: &resources,
                 chunk,
                 column_pool: &ColumnPool::new(),
+                elementwise: dpp_runtime::cpu::compiled::Elementwise::default(),
             };
             run_plan(&plan, &context).unwrap()
         }

@@ -101,6 +101,7 @@ fn render(
         // Small arrays too, so that each bounce reuses the arrays of the one
         // before it, as a full-size frame's do.
         column_pool: &ColumnPool::keeping_every_size(),
+        elementwise: dpp_runtime::cpu::compiled::Elementwise::default(),
     };
     let result = run_plan(&plan, &context).unwrap();
     let OutputValue::Array(image) = &result.outputs[0].1 else {

@@ -101,6 +101,7 @@ fn render(resources: &TraceResources, fuse: bool, gpu: bool, block: u32) -> (Vec
             resources,
             chunk: 256,
             column_pool: &ColumnPool::new(),
+            elementwise: dpp_runtime::cpu::compiled::Elementwise::default(),
         };
         run_plan(&plan, &context).unwrap()
     };
