@@ -13,6 +13,7 @@ pub mod host_eval;
 pub mod ir;
 pub mod load;
 pub mod lower;
+pub mod narrow;
 pub mod plan_text;
 pub mod resolve;
 pub mod typecheck;
@@ -156,6 +157,14 @@ fn compile(
     }
     internal.extend(validated(
         "desugar",
+        &lowered.vars,
+        &body,
+        PlanPhase::Typed,
+        pipeline_span,
+    ));
+    narrow::narrow_record_gathers(&mut body, &mut lowered.vars);
+    internal.extend(validated(
+        "narrow",
         &lowered.vars,
         &body,
         PlanPhase::Typed,

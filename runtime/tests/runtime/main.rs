@@ -13,6 +13,7 @@ mod pass_cse;
 mod pass_desugar;
 mod pass_fuse;
 mod pass_lower;
+mod pass_narrow;
 mod pass_resolve;
 mod pass_typecheck;
 mod pass_validate;
