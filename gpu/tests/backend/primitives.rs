@@ -293,6 +293,7 @@ fn run_plan_on_cpu(
         resources: data,
         chunk,
         column_pool,
+        elementwise: dpp_runtime::cpu::compiled::Elementwise::default(),
     };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -663,7 +664,8 @@ fn default_chunk_size_agrees_with_small_chunks() {
 /// stage's profile is not one opaque number: an entry per op in stage order,
 /// named after the pipeline's variable where the op makes one, timed inside
 /// the stage (on 2 threads the ops cannot add up to more than twice its wall
-/// time). A GPU stage is one kernel: no split.
+/// time), a compiled run of element-wise ops one row. A GPU stage is one
+/// kernel: no split.
 #[test]
 fn fused_stages_are_timed_op_by_op_on_the_cpu() {
     let case = fixed_case(20_000);
@@ -696,7 +698,8 @@ fn fused_stages_are_timed_op_by_op_on_the_cpu() {
         labels.extend(timing.ops.iter().map(|op| op.label.clone()));
     }
     for expected in [
-        "added = map<add>",
+        // Compiled into one loop (`cpu::compiled`): one row for both ops.
+        "compiled[2]: added = map<add> … gathered = gather",
         "permuted = scatter",
         "reduce<add>",
         "iota",
@@ -711,7 +714,7 @@ fn fused_stages_are_timed_op_by_op_on_the_cpu() {
     let adding = result
         .profile
         .iter()
-        .find(|t| t.ops.iter().any(|op| op.label == "added = map<add>"))
+        .find(|t| t.ops.iter().any(|op| op.label.contains("added = map<add>")))
         .unwrap();
     assert!(
         adding.ops.iter().any(|op| !op.thread_time.is_zero()),

@@ -243,7 +243,7 @@ fn rename_in_op(op: &mut Op, from: VarId, to: VarId) {
     }
 }
 
-fn rename_in_host(expr: &mut HostExpr, from: VarId, to: VarId) {
+pub(super) fn rename_in_host(expr: &mut HostExpr, from: VarId, to: VarId) {
     match expr {
         HostExpr::Var(v) | HostExpr::Len(v) => {
             if *v == from {

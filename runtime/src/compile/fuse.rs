@@ -548,17 +548,21 @@ impl StageFormer<'_> {
                 if !keep {
                     continue;
                 }
+                // A field of a record that is stored anyway, or was made
+                // before the stage, is a view of it; otherwise only the
+                // field is stored, not the whole record.
                 if let OpKind::Field { field } = &op.kind {
                     let src = op.inputs[0];
-                    if !materialises.contains(&src) && stage.locals.contains(&src) {
-                        materialises.push(src);
+                    if materialises.contains(&src) || !stage.locals.contains(&src) {
+                        views.push(Node::View {
+                            dst: o,
+                            src,
+                            field: field.clone(),
+                        });
+                        continue;
                     }
-                    views.push(Node::View {
-                        dst: o,
-                        src,
-                        field: field.clone(),
-                    });
-                } else if !materialises.contains(&o) {
+                }
+                if !materialises.contains(&o) {
                     materialises.push(o);
                 }
             }

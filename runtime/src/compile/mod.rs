@@ -162,7 +162,7 @@ fn compile(
         PlanPhase::Typed,
         pipeline_span,
     ));
-    narrow::narrow_record_gathers(&mut body, &mut lowered.vars);
+    narrow::narrow_records(&mut body, &mut lowered.vars);
     internal.extend(validated(
         "narrow",
         &lowered.vars,

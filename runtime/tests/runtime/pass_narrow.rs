@@ -69,17 +69,16 @@ fn field_reads_of_a_gathered_record_gather_only_their_fields() {
             out b = g.b * 2.0
         }
     ", @r"
-    stage 1 [iota → map<makePair> → .a] {
+    stage 1 [iota → map<makePair> → .a → .b] {
       over 8
       %0 = iota(8)
       pairs = map<makePair>(%0)
       pairs.a = field a of pairs
+      pairs.b = field b of pairs
       reads direct: -; indexed: -; uniform: -
-      materialises pairs: Pair
+      materialises pairs.a: u32, pairs.b: f32
       ends at length change
     }
-    view pairs.a = pairs.a
-    view pairs.b = pairs.b
     stage 2 [iota → fill → map<mul> → gather → gather → fill → map<mul>] {
       over 4
       %3 = iota(4)
@@ -126,8 +125,8 @@ fn a_record_read_whole_is_gathered_whole() {
       %4 = map<mul>(%3, %13)
       g = gather(%4, pairs)
       h = map<identity>(g)
-      g.a = field a of g
       h.a = field a of h
+      g.a = field a of g
       a = map<add>(g.a, h.a)
       reads direct: -; indexed: pairs: Pair; uniform: -
       materialises a: u32
@@ -151,28 +150,24 @@ fn a_source_rebound_after_the_gather_is_read_as_it_was_gathered() {
             out b = g.b + toF32(a) + gather(i, pairs).b
         }
     ", @r"
-    stage 1 [iota → map<makePair> → .a] {
+    stage 1 [iota → map<makePair> → .a → .b] {
       over 8
       %0 = iota(8)
       pairs = map<makePair>(%0)
       pairs.a = field a of pairs
+      pairs.b = field b of pairs
       reads direct: -; indexed: -; uniform: -
-      materialises %0: u32, pairs: Pair
+      materialises %0: u32, pairs.a: u32, pairs.b: f32
       ends at length change
     }
-    view pairs.a = pairs.a
-    view pairs.b = pairs.b
-    stage 2 [iota → fill → map<mul> → gather → gather → map<toF32> → map<add>] {
+    stage 2 [iota → fill → map<mul> → gather] {
       over 4
       %3 = iota(4)
       %22 = fill(4, 2)
       i = map<mul>(%3, %22)
       a = gather(i, pairs.a)
-      g.b = gather(i, pairs.b)
-      %16 = map<toF32>(a)
-      %17 = map<add>(g.b, %16)
-      reads direct: -; indexed: pairs.a: u32, pairs.b: f32; uniform: -
-      materialises i: u32, %17: f32
+      reads direct: -; indexed: pairs.a: u32; uniform: -
+      materialises i: u32, a: u32
       ends at length change
     }
     stage 3 [fill → map<add> → map<makePair> → .b] {
@@ -182,15 +177,17 @@ fn a_source_rebound_after_the_gather_is_read_as_it_was_gathered() {
       pairs#1 = map<makePair>(%12)
       pairs#1.b = field b of pairs#1
       reads direct: %0: u32; indexed: -; uniform: -
-      materialises pairs#1: Pair
+      materialises pairs#1.b: f32
       ends at length change
     }
-    view pairs#1.b = pairs#1.b
-    stage 4 [gather → map<add>] {
+    stage 4 [gather → map<toF32> → map<add> → gather → map<add>] {
       over 4
+      g.b = gather(i, pairs.b)
+      %16 = map<toF32>(a)
+      %17 = map<add>(g.b, %16)
       %18.b = gather(i, pairs#1.b)
       b = map<add>(%17, %18.b)
-      reads direct: i: u32, %17: f32; indexed: pairs#1.b: f32; uniform: -
+      reads direct: i: u32, a: u32; indexed: pairs.b: f32, pairs#1.b: f32; uniform: -
       materialises b: f32
       ends at control flow
     }

@@ -185,13 +185,13 @@ fn record_fields_have_the_fields_types_and_the_records_length() {
             out b = map<add>(pairs.b, pairs.b)
         }
         "#,
-        @"
+        @r"
     n: int
     %1: u32, len = n
     pairs: Pair, len = n
+    b: f32, len = n
     a: u32, len = n
     pairs.b: f32, len = n
-    b: f32, len = n
     ---
     [iota → map<makePair> → .a → .b → map<add>] over n
     "
