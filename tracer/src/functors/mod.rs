@@ -42,6 +42,7 @@ pub mod material;
 pub mod normal_color;
 pub mod occ_ray_gen;
 pub mod occluded;
+pub mod ray_order_key;
 pub mod over_background;
 pub mod reflect_ray;
 pub mod shader;
