@@ -153,12 +153,21 @@ mod tests {
         let grid = CellGrid::new(Vec3::new(-5.0, -5.0, -1.0), Vec3::new(5.0, 5.0, 0.0));
         assert_eq!(grid.scale, 32.0);
         assert_eq!(grid.morton_code(Vec3::new(-5.0, -5.0, -1.0)), 0);
-        assert_eq!(grid.morton_code(Vec3::new(-5.0 + 1.0 / 32.0, -5.0, -1.0)), 1);
-        assert_eq!(grid.morton_code(Vec3::new(-5.0, -5.0, -1.0 + 1.0 / 32.0)), 4);
+        assert_eq!(
+            grid.morton_code(Vec3::new(-5.0 + 1.0 / 32.0, -5.0, -1.0)),
+            1
+        );
+        assert_eq!(
+            grid.morton_code(Vec3::new(-5.0, -5.0, -1.0 + 1.0 / 32.0)),
+            4
+        );
         // The far corner is cell 320 along x and y, 32 along z, and outside
         // points clamp to the last cell.
         let far = grid.morton_code(Vec3::new(5.0, 5.0, 0.0));
-        assert_eq!(far, spread_bits(320) | spread_bits(320) << 1 | spread_bits(32) << 2);
+        assert_eq!(
+            far,
+            spread_bits(320) | spread_bits(320) << 1 | spread_bits(32) << 2
+        );
         assert_eq!(
             grid.morton_code(Vec3::new(1e30, -1e30, 0.0)),
             spread_bits(511) | spread_bits(32) << 2

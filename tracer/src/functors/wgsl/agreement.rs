@@ -970,7 +970,15 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
         ("occlusion rays", &ao),
         ("reflection rays, live and dead", &bounce),
     ] {
-        cases.push(agree(curved, "rayOrderKey", what, &[rays], &[], 1, INTEGERS));
+        cases.push(agree(
+            curved,
+            "rayOrderKey",
+            what,
+            &[rays],
+            &[],
+            1,
+            INTEGERS,
+        ));
     }
     for (what, rays, hits) in [
         ("camera rays", &rays, &hits),
