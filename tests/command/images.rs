@@ -5,7 +5,7 @@
 //! `DPP_BLESS=1 cargo test --test images` rewrites the golden images; a missing
 //! golden image is a failure, never a silent pass.
 
-use crate::common::{mean_flip, scene_dir, Image, SCENE_VIEW};
+use crate::common::{dpp, gpu_available, mean_flip, read_npy, scene_dir, text, Image, SCENE_VIEW};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -326,6 +326,57 @@ fn compaction_fusion_and_threads_do_not_change_the_image() {
     ] {
         let image = small_scene(dir.path(), "workload3.dpp", "96x72", extra);
         assert!(image.rgb == reference.rgb, "{extra:?} changed the image");
+    }
+}
+
+/// WORKLOAD3's `reorder` traces the occlusion and shadow rays sorted by
+/// `rayOrderKey`; `occluded` answers each ray alone, so the image and the
+/// coverage are the same bit for bit either way, on the small scene (shadows,
+/// a mirror) and the built-in one, on the CPU and (where an adapter starts)
+/// the GPU.
+#[test]
+fn reordering_rays_does_not_change_a_bit() {
+    let dir = scene_dir();
+    let mut backends = vec!["cpu"];
+    if gpu_available("reordered rays on the GPU") {
+        backends.push("gpu");
+    }
+    let mut small = vec!["scene.obj", "--size", "96x72"];
+    small.extend_from_slice(SCENE_VIEW);
+    let builtin = vec!["--size", "80x60"];
+    for backend in backends {
+        for (scene, args) in [("small", &small), ("built-in", &builtin)] {
+            let bits = |reorder: &str| -> Vec<Vec<u32>> {
+                let pipeline = crate::common::repo().join("pipelines/workload3.dpp");
+                let mut all = vec!["run", pipeline.to_str().unwrap()];
+                all.extend_from_slice(args);
+                let setting = format!("reorder={reorder}");
+                all.extend(["--set", &setting, "--backend", backend]);
+                all.extend(["--out", "image=image.npy", "--out", "alpha=alpha.npy"]);
+                let output = dpp(&all, dir.path());
+                assert!(
+                    output.status.success(),
+                    "dpp {all:?}: {}",
+                    text(&output.stderr)
+                );
+                ["image.npy", "alpha.npy"]
+                    .iter()
+                    .map(|file| {
+                        let values: Vec<f32> = read_npy(&dir.path().join(file));
+                        values.iter().map(|v| v.to_bits()).collect()
+                    })
+                    .collect()
+            };
+            let (reordered, in_order) = (bits("true"), bits("false"));
+            assert!(
+                reordered[1].contains(&1.0f32.to_bits()),
+                "{scene}: nothing was hit"
+            );
+            assert!(
+                reordered == in_order,
+                "{scene} scene on {backend}: reordering changed the image"
+            );
+        }
     }
 }
 

@@ -43,6 +43,7 @@ pub mod normal_color;
 pub mod occ_ray_gen;
 pub mod occluded;
 pub mod over_background;
+pub mod ray_order_key;
 pub mod reflect_ray;
 pub mod shader;
 pub mod shadow_ray;

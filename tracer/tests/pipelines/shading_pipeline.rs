@@ -1,6 +1,6 @@
 //! The shading functors together in the project's WORKLOAD3 pipeline
-//! (pipelines/workload3.dpp) on the CPU backend: the output does not depend on fusion or
-//! chunking, and each effect (reflection, ambient occlusion, shadows, samples
+//! (pipelines/workload3.dpp) on the CPU backend: the output does not depend on fusion,
+//! chunking or the order rays are traced in, and each effect (reflection, ambient occlusion, shadows, samples
 //! per pixel) changes the picture.
 
 use dpp_runtime::compile::{compile_file, CompileOptions};
@@ -123,11 +123,16 @@ fn differing(a: &[Vec3], b: &[Vec3]) -> usize {
 }
 
 #[test]
-fn fusion_and_chunking_do_not_change_the_image() {
+fn fusion_chunking_and_ray_order_do_not_change_the_image() {
     let resources = resources();
     let reference = render(&resources, &[], true, 4096);
     assert_eq!(reference, render(&resources, &[], false, 7));
     assert_eq!(reference, render(&resources, &[], true, 5));
+    // `occluded` answers each ray alone: tracing the occlusion and shadow
+    // rays in their own order instead of `rayOrderKey`'s gives the same bits.
+    let in_order = [("reorder", "false")];
+    assert_eq!(reference, render(&resources, &in_order, true, 4096));
+    assert_eq!(reference, render(&resources, &in_order, false, 7));
 }
 
 #[test]

@@ -964,6 +964,22 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
     ] {
         cases.push(agree(curved, "occluded", what, &[rays], &[], 1, INTEGERS));
     }
+    for (what, rays) in [
+        ("camera rays, spp 4", &rays),
+        ("shadow rays", &shadow),
+        ("occlusion rays", &ao),
+        ("reflection rays, live and dead", &bounce),
+    ] {
+        cases.push(agree(
+            curved,
+            "rayOrderKey",
+            what,
+            &[rays],
+            &[],
+            1,
+            INTEGERS,
+        ));
+    }
     for (what, rays, hits) in [
         ("camera rays", &rays, &hits),
         ("reflection rays", &bounce, &bounce_hits),
@@ -1323,6 +1339,48 @@ fn cases(envs: &Envs, exact_division: bool) -> Vec<Case<'_>> {
         "alive",
         "every kind of tmax",
         &[&simple.rays(&odd_rays)],
+        &[],
+        1,
+        INTEGERS,
+    ));
+    cases.push(agree(
+        simple,
+        "rayOrderKey",
+        "every kind of tmax",
+        &[&simple.rays(&odd_rays)],
+        &[],
+        1,
+        INTEGERS,
+    ));
+    // Origins on cell boundaries of the 10 × 10 × 1 box (cells of 1/32),
+    // outside it and not finite; directions with signed zeros and NaNs.
+    let odd_values = [
+        -5.0,
+        -5.0 + 1.0 / 32.0,
+        -1.0 / 64.0,
+        0.0,
+        -0.0,
+        4.999,
+        5.0,
+        1e30,
+        -1e30,
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+    ];
+    let odd_origins: Vec<RayRecord> = (0..300)
+        .map(|i| {
+            let mut pick = || rng.pick(&odd_values);
+            let origin = Vec3::new(pick(), pick(), pick());
+            let dir = Vec3::new(pick(), pick(), pick());
+            ray(origin, dir, 1.0, i)
+        })
+        .collect();
+    cases.push(agree(
+        simple,
+        "rayOrderKey",
+        "origins on cell boundaries, outside the box, not finite",
+        &[&simple.rays(&odd_origins)],
         &[],
         1,
         INTEGERS,

@@ -33,7 +33,7 @@ enum Reads {
     Nothing,
 }
 
-const TWINS: [(&str, Reads); 30] = [
+const TWINS: [(&str, Reads); 31] = [
     ("cameraRay", Reads::Scene),
     ("intersect", Reads::Scene),
     ("occluded", Reads::Scene),
@@ -45,6 +45,7 @@ const TWINS: [(&str, Reads); 30] = [
     ("visibleLights", Reads::Nothing),
     ("reflectRay", Reads::Scene),
     ("alive", Reads::Nothing),
+    ("rayOrderKey", Reads::Nothing),
     ("antiAlias", Reads::Nothing),
     ("globalId", Reads::Scene),
     ("material", Reads::Scene),
