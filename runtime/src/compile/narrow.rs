@@ -96,7 +96,7 @@ fn read_fields_where_made(
                     vars.push(VarInfo {
                         name,
                         span,
-                        ty: vars[output.0 as usize].ty.clone(),
+                        ty: vars[output.0 as usize].ty,
                         len: vars[record.0 as usize].len.clone(),
                     });
                     inserted.push(Node::Op(Op {
@@ -279,7 +279,7 @@ fn narrow(nodes: &mut Vec<Node>, position: usize, field_reads: &[usize], vars: &
         let Node::Op(read) = nodes.remove(at) else {
             unreachable!("`narrowable` found a field read here")
         };
-        let field_type = vars[read.outputs[0].0 as usize].ty.clone();
+        let field_type = vars[read.outputs[0].0 as usize].ty;
         let view = VarId(vars.len() as u32);
         let OpKind::Field { field } = &read.kind else {
             unreachable!("`narrowable` found a field read here")
