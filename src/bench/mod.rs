@@ -804,6 +804,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         cpu: cpu_model(),
         gpu: gpu.map(GpuInfo::of),
         threads,
+        cpu_elementwise: args.cpu_elementwise,
         size: args.size,
         warmup: args.warmup,
         rounds: args.rounds,

@@ -65,6 +65,8 @@ pub struct Report {
     /// The adapter, when the GPU backend ran the plans; `None` for the CPU backend.
     pub gpu: Option<GpuInfo>,
     pub threads: usize,
+    /// How the CPU backend ran element-wise ops (`--cpu-elementwise`).
+    pub cpu_elementwise: crate::CpuElementwise,
     pub size: (u32, u32),
     pub warmup: u32,
     pub rounds: u32,
@@ -348,8 +350,15 @@ impl Report {
             None => {
                 let _ = writeln!(
                     md,
-                    "{} ({} threads), {width}x{height}, {} warm-up + {} measured rounds per plan (times are means).\n",
-                    self.cpu, self.threads, self.warmup, self.rounds
+                    "{} ({} threads), {width}x{height}, {} warm-up + {} measured rounds per plan (times are means); element-wise ops {}.\n",
+                    self.cpu,
+                    self.threads,
+                    self.warmup,
+                    self.rounds,
+                    match self.cpu_elementwise {
+                        crate::CpuElementwise::Compiled => "compiled into loops",
+                        crate::CpuElementwise::Columns => "column at a time",
+                    }
                 );
             }
             Some(gpu) => {
