@@ -96,6 +96,39 @@ fn written_out_shading_equals_the_shader_functor_on_the_gpu() {
     }
 }
 
+/// The CPU's compiled element-wise loops (the default) against running the
+/// same ops one at a time over columns (`--cpu-elementwise columns`), on the
+/// written-out pipelines, whose shading is almost all compiled: the same
+/// images, coverage and depth, bit for bit (their floats are never NaN).
+#[test]
+fn compiled_and_column_at_a_time_shading_give_the_same_bits() {
+    let dir = scene_dir();
+    let workloads: [(&str, &[&str], &[&str]); 2] = [
+        (
+            "workload2_expressions.dpp",
+            &[],
+            &["image", "alpha", "depth"],
+        ),
+        (
+            "workload3_expressions.dpp",
+            &["--set", "spp=1"],
+            &["image", "alpha"],
+        ),
+    ];
+    for (pipeline, extra, outputs) in workloads {
+        let mut args = vec!["--size", "80x60"];
+        args.extend_from_slice(extra);
+        let compiled = run(dir.path(), pipeline, &args, "cpu", outputs);
+        args.extend(["--cpu-elementwise", "columns"]);
+        let columns = run(dir.path(), pipeline, &args, "cpu", outputs);
+        for (name, (a, b)) in outputs.iter().zip(compiled.iter().zip(&columns)) {
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(a), bits(b), "{pipeline}: {name}");
+        }
+        assert!(compiled[1].contains(&1.0), "{pipeline}: nothing was hit");
+    }
+}
+
 /// docs/shading.md's two worked edits, made to copies of the pipelines: each
 /// still runs, and only darkens the image (the specular term, and the
 /// lights' share that occlusion now also takes, only add light).
