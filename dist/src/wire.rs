@@ -11,26 +11,9 @@ use dpp_runtime::{Column, ColumnView, ElemType, RecordRegistry};
 use std::ops::Range;
 use std::sync::Arc;
 
-/// Bytes one element of `ty` takes on the wire (a `bool` is one byte).
-pub fn elem_bytes(ty: ElemType, records: &RecordRegistry) -> usize {
-    match ty {
-        ElemType::Bool => 1,
-        ElemType::U32 | ElemType::I32 | ElemType::F32 => 4,
-        ElemType::Vec2 => 8,
-        ElemType::Vec3 => 12,
-        ElemType::Vec4 => 16,
-        ElemType::Record(id) => records
-            .get(id)
-            .fields
-            .iter()
-            .map(|(_, field)| elem_bytes(*field, records))
-            .sum(),
-    }
-}
-
 /// Bytes one pixel of all `columns` takes on the wire.
 pub fn pixel_bytes(types: &[ElemType], records: &RecordRegistry) -> usize {
-    types.iter().map(|ty| elem_bytes(*ty, records)).sum()
+    types.iter().map(|ty| ty.bytes(records)).sum()
 }
 
 /// Appends `view`'s elements to `out`.
@@ -64,7 +47,7 @@ pub fn decode_column<'b>(
     bytes: &'b [u8],
     records: &RecordRegistry,
 ) -> Result<(Column, &'b [u8]), RunError> {
-    let size = elem_bytes(ty, records) * len;
+    let size = ty.bytes(records) * len;
     if bytes.len() < size {
         return Err(RunError::internal(format!(
             "a message holds {} bytes, {len} {} elements need {size}",

@@ -68,6 +68,25 @@ impl ElemType {
             ElemType::Bool | ElemType::Record(_) => 0,
         }
     }
+
+    /// The bytes one element takes in a column (a `bool` is one byte; a
+    /// record, its fields' together): what MPI messages carry per element and
+    /// the stride of the CPU's compiled loops.
+    pub fn bytes(self, records: &RecordRegistry) -> usize {
+        match self {
+            ElemType::Bool => 1,
+            ElemType::U32 | ElemType::I32 | ElemType::F32 => 4,
+            ElemType::Vec2 => 8,
+            ElemType::Vec3 => 12,
+            ElemType::Vec4 => 16,
+            ElemType::Record(id) => records
+                .get(id)
+                .fields
+                .iter()
+                .map(|(_, field)| field.bytes(records))
+                .sum(),
+        }
+    }
 }
 
 /// A record type registered by the functor library (`Ray`, `Hit`, …): named

@@ -18,6 +18,35 @@ pub fn library() -> FunctorLibrary {
     library
 }
 
+/// [`library`] with `Pair { a: u32, b: f32 }` and `makePair(x: u32) -> Pair`
+/// (`a = x`, `b = x / 2`), for the tests of records.
+pub fn library_with_pairs() -> FunctorLibrary {
+    let mut library = library();
+    let pair = library.records.register(RecordType {
+        name: "Pair".into(),
+        fields: vec![("a".into(), ElemType::U32), ("b".into(), ElemType::F32)],
+        doc: "a test record".into(),
+    });
+    let signature = Signature::map("makePair")
+        .input("x", ElemType::U32)
+        .output("pair", ElemType::Record(pair))
+        .doc("a Pair from x");
+    let make_pair =
+        dpp_runtime::functor::ClosureFunctor::new(signature, move |_, inputs, outputs| {
+            let x = inputs[0].as_u32();
+            outputs[0] = Column::Record {
+                ty: pair,
+                fields: vec![
+                    std::sync::Arc::new(Column::U32(x.to_vec())),
+                    std::sync::Arc::new(Column::F32(x.iter().map(|v| *v as f32 / 2.0).collect())),
+                ],
+            };
+            Ok(())
+        });
+    library.register(std::sync::Arc::new(make_pair));
+    library
+}
+
 /// Removes the indentation common to every non-blank line, and a leading newline.
 pub fn trim_indent(text: &str) -> String {
     let text = text.strip_prefix('\n').unwrap_or(text);

@@ -5,44 +5,13 @@
 //! `check!(source, @"…")` shows the compiled plan's ops, then the outputs,
 //! run fused and unfused (which must agree).
 
-use crate::common::{check, compile, diagnostics_text, ops_text, run_text, trim_indent};
-use dpp_runtime::functor::ClosureFunctor;
-use dpp_runtime::signature::Signature;
-use dpp_runtime::*;
+use crate::common::{
+    check, compile, diagnostics_text, library_with_pairs, ops_text, run_text, trim_indent,
+};
 use std::path::Path;
-use std::sync::Arc;
-
-/// The generic functors and `makePair(x) = Pair { a: x, b: x / 2 }`.
-fn library() -> FunctorLibrary {
-    let mut library = crate::common::library();
-    let pair = library.records.register(RecordType {
-        name: "Pair".into(),
-        fields: vec![("a".into(), ElemType::U32), ("b".into(), ElemType::F32)],
-        doc: "a test record".into(),
-    });
-    let signature = Signature::map("makePair")
-        .input("x", ElemType::U32)
-        .output("pair", ElemType::Record(pair))
-        .doc("a Pair from x");
-    let make_pair = ClosureFunctor::new(signature, move |_, inputs, outputs| {
-        let ColumnView::U32(x) = &inputs[0] else {
-            unreachable!("a u32 input")
-        };
-        outputs[0] = Column::Record {
-            ty: pair,
-            fields: vec![
-                Arc::new(Column::U32(x.to_vec())),
-                Arc::new(Column::F32(x.iter().map(|v| *v as f32 / 2.0).collect())),
-            ],
-        };
-        Ok(())
-    });
-    library.register(Arc::new(make_pair));
-    library
-}
 
 fn report(source: &str) -> String {
-    let library = library();
+    let library = library_with_pairs();
     let path = Path::new("narrow.dpp");
     let source = trim_indent(source);
     let fused = match compile(path, &source, &library, true) {

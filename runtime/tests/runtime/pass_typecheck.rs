@@ -14,52 +14,9 @@ use dpp_runtime::cpu::column_pool::ColumnPool;
 use dpp_runtime::cpu::exec::{run_plan, RunContext};
 use dpp_runtime::*;
 use std::path::Path;
-use std::sync::Arc;
-
-/// `makePair(x: u32) -> Pair` with `Pair { a: u32, b: f32 }`: `a = x`, `b = x / 2`.
-struct MakePair {
-    signature: Signature,
-}
-
-impl Functor for MakePair {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-
-    fn run_cpu(
-        &self,
-        _: &CallContext<'_>,
-        inputs: &[ColumnView<'_>],
-        outputs: &mut [Column],
-    ) -> Result<(), FunctorError> {
-        let x = inputs[0].as_u32();
-        let Column::Record { ty, .. } = &outputs[0] else {
-            return Err(FunctorError::bad_input("Pair is a record"));
-        };
-        outputs[0] = Column::Record {
-            ty: *ty,
-            fields: vec![
-                Arc::new(Column::U32(x.to_vec())),
-                Arc::new(Column::F32(x.iter().map(|v| *v as f32 / 2.0).collect())),
-            ],
-        };
-        Ok(())
-    }
-}
 
 fn library() -> FunctorLibrary {
-    let mut library = crate::common::library();
-    let pair = library.records.register(RecordType {
-        name: "Pair".into(),
-        fields: vec![("a".into(), ElemType::U32), ("b".into(), ElemType::F32)],
-        doc: "a test record".into(),
-    });
-    library.register(Arc::new(MakePair {
-        signature: Signature::map("makePair")
-            .input("x", ElemType::U32)
-            .output("pair", ElemType::Record(pair))
-            .doc("a Pair from x"),
-    }));
+    let mut library = crate::common::library_with_pairs();
     library.uniforms.declare("camera", "pixels", HostType::Int);
     library.uniforms.declare("camera", "fov", HostType::Float);
     library

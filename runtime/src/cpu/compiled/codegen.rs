@@ -93,25 +93,9 @@ pub(super) fn supports(name: &str, inputs: &[ElemType]) -> bool {
     }
 }
 
-/// The bytes one element of a primitive type takes in its column.
-pub(super) fn element_bytes(ty: ElemType) -> i64 {
-    match ty {
-        ElemType::Bool => 1,
-        ElemType::U32 | ElemType::I32 | ElemType::F32 => 4,
-        ElemType::Vec2 => 8,
-        ElemType::Vec3 => 12,
-        ElemType::Vec4 => 16,
-        ElemType::Record(_) => 0,
-    }
-}
-
+/// SSA values per element: one per component, one for a bool.
 fn lanes(ty: ElemType) -> usize {
-    match ty {
-        ElemType::Vec2 => 2,
-        ElemType::Vec3 => 3,
-        ElemType::Vec4 => 4,
-        _ => 1,
-    }
+    ty.components().max(1) as usize
 }
 
 fn lane_type(ty: ElemType) -> Type {
@@ -401,7 +385,10 @@ impl Emitter<'_, '_> {
     }
 
     fn address(&mut self, ty: ElemType, base: Value, index: Value) -> Value {
-        let offset = self.b.ins().imul_imm_s(index, element_bytes(ty));
+        let offset = self
+            .b
+            .ins()
+            .imul_imm_s(index, ty.bytes(self.records) as i64);
         self.b.ins().iadd(base, offset)
     }
 

@@ -448,33 +448,17 @@ impl Segment {
 }
 
 fn leaf_pointers(view: &ColumnView<'_>, out: &mut Vec<*const u8>) {
-    match view {
-        ColumnView::Bool(v) => out.push(v.as_ptr().cast()),
-        ColumnView::U32(v) => out.push(v.as_ptr().cast()),
-        ColumnView::I32(v) => out.push(v.as_ptr().cast()),
-        ColumnView::F32(v) => out.push(v.as_ptr().cast()),
-        ColumnView::Vec2(v) => out.push(v.as_ptr().cast()),
-        ColumnView::Vec3(v) => out.push(v.as_ptr().cast()),
-        ColumnView::Vec4(v) => out.push(v.as_ptr().cast()),
-        ColumnView::Record { fields, .. } => fields.iter().for_each(|f| leaf_pointers(f, out)),
-    }
+    crate::for_each_primitive!(ColumnView, view, v => out.push(v.as_ptr().cast()),
+        ColumnView::Record { fields, .. } => fields.iter().for_each(|f| leaf_pointers(f, out)))
 }
 
 /// `None` if a record's field is shared (never, for a column just made).
 fn leaf_pointers_mut(column: &mut Column, out: &mut Vec<*mut u8>) -> Option<()> {
-    match column {
-        Column::Bool(v) => out.push(v.as_mut_ptr().cast()),
-        Column::U32(v) => out.push(v.as_mut_ptr().cast()),
-        Column::I32(v) => out.push(v.as_mut_ptr().cast()),
-        Column::F32(v) => out.push(v.as_mut_ptr().cast()),
-        Column::Vec2(v) => out.push(v.as_mut_ptr().cast()),
-        Column::Vec3(v) => out.push(v.as_mut_ptr().cast()),
-        Column::Vec4(v) => out.push(v.as_mut_ptr().cast()),
-        Column::Record { fields, .. } => {
-            for field in fields {
-                leaf_pointers_mut(Arc::get_mut(field)?, out)?;
-            }
+    crate::for_each_primitive!(Column, column, v => out.push(v.as_mut_ptr().cast()),
+    Column::Record { fields, .. } => {
+        for field in fields {
+            leaf_pointers_mut(Arc::get_mut(field)?, out)?;
         }
-    }
+    });
     Some(())
 }
