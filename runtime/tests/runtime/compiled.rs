@@ -6,8 +6,9 @@
 //! way.
 //!
 //! `check(source)` compiles `source` fused, runs it both ways on 2 threads
-//! with small chunks (so that chunk edges and a remainder are crossed),
-//! asserts that at least one run of ops was compiled, and compares every
+//! with small chunks of 98 elements (so that chunk edges, a short last
+//! chunk, and the kernels' blocks of four and the elements after the last
+//! block are all crossed), asserts that at least one run of ops was compiled, and compares every
 //! output bit for bit.
 
 use crate::common::{library, pipelines_path, trim_indent};
@@ -91,7 +92,7 @@ fn run(source: &str, elementwise: Elementwise) -> Result<RunResult, String> {
         library: &library,
         uniforms: &uniforms,
         resources: &(),
-        chunk: 100,
+        chunk: 98,
         column_pool: &ColumnPool::new(),
         elementwise,
     };
@@ -288,7 +289,11 @@ fn gathers_and_iota_inside_a_compiled_run() {
     n = len(a)
     j = iota(n) * 7 % n
     out shuffled = gather(j, a) + gather(j, b) * 2.0
-    out positions = iota(n) + j",
+    out positions = iota(n) + j
+    // One index into arrays of two lengths, inside the shorter.
+    short = gather(iota(300), b)
+    k = j % 300
+    out mixed = gather(k, a) * gather(k, short)",
     ));
 }
 
@@ -300,6 +305,10 @@ fn a_failing_element_fails_as_it_does_column_at_a_time() {
         "out q = toU32(a) / toU32(b)",
         "out r = toI32(a) % toI32(b * 0.0)",
         "out g = gather(toU32(a) + 5, b) * 2.0",
+        // Inside the longer array, past the shorter.
+        "short = gather(iota(300), b)\n    out g = gather(i, a) * gather(i, short)",
+        // From an empty array.
+        "none = gather(iota(0), b)\n    out g = gather(i, a) * gather(i, none)",
     ] {
         let source = over_edges(&format!("    {failing}"));
         let compiled = run(&source, Elementwise::Compiled).map(|_| ());

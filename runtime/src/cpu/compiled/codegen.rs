@@ -1,27 +1,33 @@
-//! Machine code for a [`Segment`]: one loop over the chunk's elements that
+//! Machine code for a [`Segment`]: a loop over the chunk's elements that
 //! computes every op of the segment per element, in registers, and stores
-//! only the values read after it.
+//! only the values read after it. The loop takes [`BLOCK`] elements at a
+//! time, one per lane of 128-bit vectors (Cranelift's widest on x86), then
+//! the chunk's last few elements one at a time.
 //!
 //! Every operation computes exactly what the generic functor's CPU kernel
-//! computes (same IEEE operations in the same order, the same libm calls for
-//! `pow`, `exp`, `log`, `sin` and `cos`), so a compiled stage equals the
-//! column-at-a-time one bit for bit (`tests::agreement`). Where the kernel
-//! would fail (an integer division by zero, a gather out of range) the
-//! loop stops and returns the element's position plus one; the caller then
-//! runs the segment column at a time, which reports the error itself.
+//! computes (same IEEE operations in the same order, lane by lane; the same
+//! libm calls for `pow`, `exp`, `log`, `sin` and `cos`), so a compiled stage
+//! equals the column-at-a-time one bit for bit (`tests::agreement`). What
+//! has no vector instruction (integer division, the libm calls, the loads
+//! of a gather) is computed lane by lane with the one-element code. Where
+//! the kernel would fail (an integer division by zero, a gather out of
+//! range) the loop stops and returns a nonzero status (the position of the
+//! element or block, plus one); the caller then runs the segment column at
+//! a time, which reports the error itself.
 
 use super::{Segment, SegmentStep};
 use crate::host::HostValue;
 use crate::types::{ElemType, RecordRegistry};
 use cranelift_codegen::ir::condcodes::{FloatCC, IntCC};
 use cranelift_codegen::ir::{
-    types, AbiParam, Block, FuncRef, InstBuilder, MemFlagsData, Type, Value,
+    types, AbiParam, Block, ConstantData, Endianness, FuncRef, InstBuilder, MemFlagsData,
+    StackSlot, StackSlotData, StackSlotKind, Type, Value,
 };
 use cranelift_codegen::settings::{self, Configurable};
 use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, FuncId, Linkage, Module};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 
 /// `(inputs, gathered lengths, outputs, params, n, first index) -> status`:
 /// the leaf pointers of the element-wise inputs (already at the chunk's
@@ -49,11 +55,37 @@ extern "C" fn dpp_cos(x: f32) -> f32 {
     x.cos()
 }
 
-const UNARY_CALLS: [(&str, extern "C" fn(f32) -> f32); 4] = [
-    ("exp", dpp_exp),
-    ("log", dpp_log),
-    ("sin", dpp_sin),
-    ("cos", dpp_cos),
+/// The same for a block: arguments and result in [`BLOCK`]-float arrays
+/// (the kernel's stack), so that the vector loop makes one call per block,
+/// not one per lane, and saves its live vectors around it once.
+macro_rules! block_calls {
+    ($($block:ident = $scalar:ident($($arg:ident),+);)+) => {$(
+        /// # Safety
+        /// Every pointer addresses a `[f32; 4]` (the kernel's stack slot).
+        unsafe extern "C" fn $block($($arg: *const [f32; 4],)+ out: *mut [f32; 4]) {
+            // SAFETY: the caller's contract above.
+            let ($($arg,)+) = unsafe { ($(*$arg,)+) };
+            let result = std::array::from_fn(|e| $scalar($($arg[e]),+));
+            // SAFETY: the caller's contract above.
+            unsafe { *out = result };
+        }
+    )+};
+}
+block_calls! {
+    dpp_pow_block = dpp_pow(a, b);
+    dpp_exp_block = dpp_exp(x);
+    dpp_log_block = dpp_log(x);
+    dpp_sin_block = dpp_sin(x);
+    dpp_cos_block = dpp_cos(x);
+}
+
+/// The calls by functor name: the element's function and the block's.
+type UnaryBlock = unsafe extern "C" fn(*const [f32; 4], *mut [f32; 4]);
+const UNARY_CALLS: [(&str, extern "C" fn(f32) -> f32, UnaryBlock); 4] = [
+    ("exp", dpp_exp, dpp_exp_block),
+    ("log", dpp_log, dpp_log_block),
+    ("sin", dpp_sin, dpp_sin_block),
+    ("cos", dpp_cos, dpp_cos_block),
 ];
 
 /// Whether the generic functor `name` compiles for these input types (its
@@ -93,12 +125,16 @@ pub(super) fn supports(name: &str, inputs: &[ElemType]) -> bool {
     }
 }
 
+/// Elements per iteration of the vector loop: 32-bit lanes of a 128-bit vector.
+const BLOCK: u32 = 4;
+
 /// SSA values per element: one per component, one for a bool.
-fn lanes(ty: ElemType) -> usize {
+fn components(ty: ElemType) -> usize {
     ty.components().max(1) as usize
 }
 
-fn lane_type(ty: ElemType) -> Type {
+/// The type of one component of one element.
+fn scalar_type(ty: ElemType) -> Type {
     match ty {
         ElemType::Bool => types::I8,
         ElemType::U32 | ElemType::I32 => types::I32,
@@ -106,17 +142,46 @@ fn lane_type(ty: ElemType) -> Type {
     }
 }
 
-/// A value of the segment inside the loop's body.
+/// Vector stores: columns are aligned to their scalars only.
+fn vector_flags() -> MemFlagsData {
+    MemFlagsData::new().with_notrap()
+}
+
+/// Loads of the segment's inputs, which nothing writes while the kernel
+/// runs, from places always inside them (gathers are clamped): free of
+/// effects, so that Cranelift computes each where it is used (a gathered
+/// scalar straight into its vector lane, not held in a register from an
+/// early load) or hoists it out of the loop.
+fn input_flags(vector: bool) -> MemFlagsData {
+    let flags = match vector {
+        true => vector_flags(),
+        false => MemFlagsData::trusted(),
+    };
+    flags.with_readonly().with_can_move()
+}
+
+/// A value of the segment inside the loop's body: for the elements of one
+/// iteration (one, or a block of [`BLOCK`] in the lanes of each vector).
 #[derive(Clone)]
 enum Val {
     /// A primitive: one SSA value per component (one for scalars and bools).
-    Prim { lanes: Vec<Value> },
+    /// One element's bool is an `i8` 0 or 1, a block's an `i32x4` mask.
+    Prim { components: Vec<Value> },
     /// A record not yet loaded: each field's column (its base pointer) and
-    /// the element's position in them. A field is loaded when read.
+    /// the elements' places in them. A field is loaded when read.
     Record {
         fields: Vec<(ElemType, Value)>,
-        index: Value,
+        places: Places,
     },
+}
+
+/// Where an iteration's elements are in a column.
+#[derive(Clone)]
+enum Places {
+    /// Consecutive, from this position (an `i64`).
+    From(Value),
+    /// One position (an `i64`) per element: a gather's.
+    Each(Vec<Value>),
 }
 
 /// Compiles `segment` into machine code. The module is never freed: a kernel
@@ -130,8 +195,10 @@ pub(super) fn compile(segment: &Segment, records: &RecordRegistry) -> Result<Ker
         .map_err(|e| e.to_string())?;
     let mut jit = JITBuilder::with_isa(isa, default_libcall_names());
     jit.symbol("dpp_pow", dpp_pow as *const u8);
-    for (name, function) in UNARY_CALLS {
+    jit.symbol("dpp_pow_block", dpp_pow_block as *const u8);
+    for (name, function, block) in UNARY_CALLS {
         jit.symbol(format!("dpp_{name}"), function as *const u8);
+        jit.symbol(format!("dpp_{name}_block"), block as *const u8);
     }
     let mut module = JITModule::new(jit);
     let pointer = module.target_config().pointer_type();
@@ -150,7 +217,11 @@ pub(super) fn compile(segment: &Segment, records: &RecordRegistry) -> Result<Ker
         let mut builder = FunctionBuilder::new(&mut context.func, &mut builder_context);
         let calls = libm
             .iter()
-            .map(|(name, id)| (*name, module.declare_func_in_func(*id, builder.func)))
+            .map(|(name, element, block)| {
+                let element = module.declare_func_in_func(*element, builder.func);
+                let block = module.declare_func_in_func(*block, builder.func);
+                (*name, (element, block))
+            })
             .collect();
         Emitter::emit(&mut builder, segment, records, calls)?;
         builder.seal_all_blocks();
@@ -172,41 +243,83 @@ pub(super) fn compile(segment: &Segment, records: &RecordRegistry) -> Result<Ker
     Ok(unsafe { std::mem::transmute::<*const u8, KernelEntry>(code) })
 }
 
-fn declare_libm(module: &mut JITModule) -> Result<Vec<(&'static str, FuncId)>, String> {
-    let mut declared = Vec::new();
-    let signature = |arity: usize| {
-        let mut s = module.make_signature();
+/// Each libm function by functor name: the element's and the block's.
+type Libm = Vec<(&'static str, FuncId, FuncId)>;
+
+fn declare_libm(module: &mut JITModule) -> Result<Libm, String> {
+    let pointer = module.target_config().pointer_type();
+    let mut declare = |name: &str, arity: usize| {
+        let mut element = module.make_signature();
+        let mut block = module.make_signature();
         for _ in 0..arity {
-            s.params.push(AbiParam::new(types::F32));
+            element.params.push(AbiParam::new(types::F32));
+            block.params.push(AbiParam::new(pointer));
         }
-        s.returns.push(AbiParam::new(types::F32));
-        s
+        element.returns.push(AbiParam::new(types::F32));
+        block.params.push(AbiParam::new(pointer));
+        let element = module.declare_function(&format!("dpp_{name}"), Linkage::Import, &element);
+        let block = module.declare_function(&format!("dpp_{name}_block"), Linkage::Import, &block);
+        match (element, block) {
+            (Ok(element), Ok(block)) => Ok((element, block)),
+            (Err(e), _) | (_, Err(e)) => Err(e.to_string()),
+        }
     };
-    let pow = signature(2);
-    let unary = signature(1);
-    declared.push((
-        "pow",
-        module
-            .declare_function("dpp_pow", Linkage::Import, &pow)
-            .map_err(|e| e.to_string())?,
-    ));
-    for (name, _) in UNARY_CALLS {
-        let id = module
-            .declare_function(&format!("dpp_{name}"), Linkage::Import, &unary)
-            .map_err(|e| e.to_string())?;
-        declared.push((name, id));
+    let mut declared = Vec::new();
+    let (element, block) = declare("pow", 2)?;
+    declared.push(("pow", element, block));
+    for (name, _, _) in UNARY_CALLS {
+        let (element, block) = declare(name, 1)?;
+        declared.push((name, element, block));
     }
     Ok(declared)
+}
+
+/// The bound of an index that the segment gathers with: every element
+/// gathers from each of the index's arrays, so it fails exactly where the
+/// index reaches the shortest. One check and one clamp serve them all.
+struct IndexLimit {
+    /// The shortest length (i64), and the same capped at `u32::MAX` (i32)
+    /// for the vector loop's check: an index equal to that cap fails there,
+    /// which only sends the chunk to the column run.
+    len: Value,
+    len_u32: Value,
+}
+
+/// What the loop's bodies read that does not change per element, loaded
+/// once before the loop.
+struct Invariants {
+    /// Each element-wise input's leaf pointers, at the chunk's start.
+    elementwise: Vec<Vec<Value>>,
+    /// Each gathered array's leaf pointers.
+    gathered: Vec<Vec<Value>>,
+    /// By index variable.
+    limits: BTreeMap<u32, IndexLimit>,
+    /// Each output's leaf pointers, at the chunk's start.
+    outputs: Vec<Vec<Value>>,
+    /// Each fill's value for one element, and splatted for a block.
+    fills: Vec<(Val, Val)>,
+    /// The chunk's first index in the whole array (for `iota`).
+    first: Value,
 }
 
 struct Emitter<'b, 'f> {
     b: &'b mut FunctionBuilder<'f>,
     records: &'b RecordRegistry,
-    calls: HashMap<&'static str, FuncRef>,
-    /// The loop's element position (i64) and the block a failure jumps to.
+    /// The libm functions: for one element, and for a block.
+    calls: HashMap<&'static str, (FuncRef, FuncRef)>,
+    /// Elements per iteration of the body being emitted: 1 or [`BLOCK`].
+    width: u32,
+    /// The iteration's first element position (i64) and the block a
+    /// failure jumps to.
     position: Value,
     fail: Block,
     values: HashMap<u32, Val>,
+    /// The places of each index variable's gathers in this iteration.
+    gathered_places: HashMap<u32, Places>,
+    /// Whether every check of the iteration so far holds (see [`Self::require`]).
+    valid: Option<Value>,
+    /// Room for a block call's arguments and result (three vectors).
+    call_slot: StackSlot,
 }
 
 impl Emitter<'_, '_> {
@@ -214,11 +327,13 @@ impl Emitter<'_, '_> {
         b: &mut FunctionBuilder<'_>,
         segment: &Segment,
         records: &RecordRegistry,
-        calls: HashMap<&'static str, FuncRef>,
+        calls: HashMap<&'static str, (FuncRef, FuncRef)>,
     ) -> Result<(), String> {
         let entry = b.create_block();
-        let head = b.create_block();
-        let body = b.create_block();
+        let block_head = b.create_block();
+        let block_body = b.create_block();
+        let element_head = b.create_block();
+        let element_body = b.create_block();
         let exit = b.create_block();
         let fail = b.create_block();
         b.append_block_params_for_function_params(entry);
@@ -228,127 +343,68 @@ impl Emitter<'_, '_> {
         };
         let (inputs, lengths, outputs, params, n, first) =
             (*inputs, *lengths, *outputs, *params, *n, *first);
-        let flags = MemFlagsData::trusted();
-        // Everything that does not change per element is loaded once, here.
-        let mut leaf = 0;
-        let mut load_pointer = |b: &mut FunctionBuilder<'_>, base: Value| {
-            let p = b.ins().load(types::I64, flags, base, 8 * leaf);
-            leaf += 1;
-            p
-        };
-        let elementwise: Vec<Vec<Value>> = segment
-            .elementwise
-            .iter()
-            .map(|(_, ty)| {
-                leaf_types(*ty, records)
-                    .iter()
-                    .map(|_| load_pointer(b, inputs))
-                    .collect()
-            })
-            .collect();
-        let gathered: Vec<(Vec<Value>, Value)> = segment
-            .gathered
-            .iter()
-            .enumerate()
-            .map(|(k, (_, ty))| {
-                let leaves = leaf_types(*ty, records)
-                    .iter()
-                    .map(|_| load_pointer(b, inputs))
-                    .collect();
-                let len = b.ins().load(types::I64, flags, lengths, 8 * k as i32);
-                (leaves, len)
-            })
-            .collect();
-        let mut leaf = 0;
-        let output_pointers: Vec<Vec<Value>> = segment
-            .outputs
-            .iter()
-            .map(|(_, ty)| {
-                leaf_types(*ty, records)
-                    .iter()
-                    .map(|_| {
-                        let p = b.ins().load(types::I64, flags, outputs, 8 * leaf);
-                        leaf += 1;
-                        p
-                    })
-                    .collect()
-            })
-            .collect();
-        let fills: Vec<Val> = segment
-            .fills
-            .iter()
-            .enumerate()
-            .map(|(k, ty)| {
-                let lanes = (0..lanes(*ty))
-                    .map(|lane| {
-                        b.ins()
-                            .load(lane_type(*ty), flags, params, (16 * k + 4 * lane) as i32)
-                    })
-                    .collect();
-                Val::Prim { lanes }
-            })
-            .collect();
         let zero = b.ins().iconst(types::I64, 0);
-        b.ins().jump(head, &[zero.into()]);
-
-        b.append_block_param(head, types::I64);
-        b.switch_to_block(head);
-        let position = b.block_params(head)[0];
-        let more = b.ins().icmp(IntCC::UnsignedLessThan, position, n);
-        b.ins().brif(more, body, &[], exit, &[]);
-
-        b.switch_to_block(body);
+        let call_slot =
+            b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, 3 * 16, 4));
         let mut emitter = Emitter {
+            call_slot,
             b,
             records,
             calls,
-            position,
+            width: 1,
+            position: zero,
             fail,
             values: HashMap::new(),
+            gathered_places: HashMap::new(),
+            valid: None,
         };
-        for (k, (var, ty)) in segment.elementwise.iter().enumerate() {
-            let val = emitter.at(*ty, &elementwise[k], position);
-            emitter.values.insert(var.0, val);
+        let invariants = emitter.invariants(segment, inputs, lengths, outputs, params, first);
+        let b = &mut emitter.b;
+        // Every element gathers, so an empty array it gathers from fails the
+        // first, and no loop runs: the clamped gathers (some hoisted out of
+        // the loop) then always read inside.
+        let mut empty = None;
+        for limit in invariants.limits.values() {
+            let this_empty = b.ins().icmp_imm_u(IntCC::Equal, limit.len, 0);
+            empty = Some(match empty {
+                Some(any) => b.ins().bor(any, this_empty),
+                None => this_empty,
+            });
         }
-        for step in &segment.steps {
-            let val = match step {
-                SegmentStep::Iota { .. } => {
-                    let index = emitter.b.ins().iadd(first, position);
-                    let index = emitter.b.ins().ireduce(types::I32, index);
-                    Val::Prim { lanes: vec![index] }
-                }
-                SegmentStep::Fill { fill, .. } => fills[*fill].clone(),
-                SegmentStep::Field { record, field, .. } => emitter.field(*record, *field)?,
-                SegmentStep::Gather {
-                    index, gathered: g, ..
-                } => {
-                    let index = emitter.prim(*index)?[0];
-                    let index = emitter.b.ins().uextend(types::I64, index);
-                    let (leaves, len) = &gathered[*g];
-                    let inside = emitter.b.ins().icmp(IntCC::UnsignedLessThan, index, *len);
-                    emitter.check(inside);
-                    emitter.at(segment.gathered[*g].1, leaves, index)
-                }
-                SegmentStep::Map {
-                    functor,
-                    inputs,
-                    output_type,
-                    named,
-                    ..
-                } => emitter.map(functor, inputs, *output_type, named)?,
+        if let Some(empty) = empty {
+            let (nothing_to_gather, go_on) = (b.create_block(), b.create_block());
+            b.ins().brif(empty, nothing_to_gather, &[], go_on, &[]);
+            b.switch_to_block(nothing_to_gather);
+            let elements = b.ins().icmp_imm_u(IntCC::NotEqual, n, 0);
+            b.ins().brif(elements, fail, &[zero.into()], exit, &[]);
+            b.switch_to_block(go_on);
+        }
+        let blocks_end = b.ins().band_imm_s(n, -i64::from(BLOCK));
+        b.ins().jump(block_head, &[zero.into()]);
+
+        // Whole blocks, then the rest element by element.
+        for (width, head, body, end, next_head) in [
+            (BLOCK, block_head, block_body, blocks_end, element_head),
+            (1, element_head, element_body, n, exit),
+        ] {
+            let b = &mut emitter.b;
+            b.append_block_param(head, types::I64);
+            b.switch_to_block(head);
+            let position = b.block_params(head)[0];
+            let more = b.ins().icmp(IntCC::UnsignedLessThan, position, end);
+            let rest: &[_] = if width == BLOCK {
+                &[position.into()]
+            } else {
+                &[]
             };
-            emitter.values.insert(step.output().0, val);
+            b.ins().brif(more, body, &[], next_head, rest);
+            b.switch_to_block(body);
+            emitter.width = width;
+            emitter.position = position;
+            emitter.body(segment, &invariants)?;
+            let next = emitter.b.ins().iadd_imm_s(position, i64::from(width));
+            emitter.b.ins().jump(head, &[next.into()]);
         }
-        for ((var, ty), pointers) in segment.outputs.iter().zip(&output_pointers) {
-            let val = emitter
-                .values
-                .get(&var.0)
-                .cloned()
-                .ok_or("an unknown output")?;
-            emitter.store(*ty, val, pointers)?;
-        }
-        let next = emitter.b.ins().iadd_imm_s(position, 1);
-        emitter.b.ins().jump(head, &[next.into()]);
 
         let b = emitter.b;
         b.switch_to_block(exit);
@@ -363,9 +419,239 @@ impl Emitter<'_, '_> {
         Ok(())
     }
 
-    /// The element at `index` of the column(s) `leaves` of type `ty`: loaded
-    /// now for a primitive, left to its fields' reads for a record.
-    fn at(&mut self, ty: ElemType, leaves: &[Value], index: Value) -> Val {
+    fn invariants(
+        &mut self,
+        segment: &Segment,
+        inputs: Value,
+        lengths: Value,
+        outputs: Value,
+        params: Value,
+        first: Value,
+    ) -> Invariants {
+        let flags = MemFlagsData::trusted();
+        let records = self.records;
+        let mut leaf = 0;
+        let mut load_pointer = |b: &mut FunctionBuilder<'_>, base: Value| {
+            let p = b.ins().load(types::I64, flags, base, 8 * leaf);
+            leaf += 1;
+            p
+        };
+        let mut pointers = |b: &mut FunctionBuilder<'_>, ty: ElemType, base: Value| {
+            leaf_types(ty, records)
+                .iter()
+                .map(|_| load_pointer(b, base))
+                .collect::<Vec<_>>()
+        };
+        let elementwise = segment
+            .elementwise
+            .iter()
+            .map(|(_, ty)| pointers(self.b, *ty, inputs))
+            .collect();
+        let gathered: Vec<(Vec<Value>, Value)> = segment
+            .gathered
+            .iter()
+            .enumerate()
+            .map(|(k, (_, ty))| {
+                let leaves = pointers(self.b, *ty, inputs);
+                let len = self.b.ins().load(types::I64, flags, lengths, 8 * k as i32);
+                (leaves, len)
+            })
+            .collect();
+        let (gathered, lens): (Vec<_>, Vec<_>) = gathered.into_iter().unzip();
+        let mut shortest: BTreeMap<u32, Value> = BTreeMap::new();
+        for step in &segment.steps {
+            if let SegmentStep::Gather {
+                index, gathered: g, ..
+            } = step
+            {
+                let len = match shortest.get(index) {
+                    Some(&other) => self.b.ins().umin(other, lens[*g]),
+                    None => lens[*g],
+                };
+                shortest.insert(*index, len);
+            }
+        }
+        let cap = self.b.ins().iconst(types::I64, i64::from(u32::MAX));
+        let limits = shortest
+            .into_iter()
+            .map(|(index, len)| {
+                let capped = self.b.ins().umin(len, cap);
+                let len_u32 = self.b.ins().ireduce(types::I32, capped);
+                (index, IndexLimit { len, len_u32 })
+            })
+            .collect();
+        let mut leaf = 0;
+        let outputs = segment
+            .outputs
+            .iter()
+            .map(|(_, ty)| {
+                leaf_types(*ty, records)
+                    .iter()
+                    .map(|_| {
+                        let p = self.b.ins().load(types::I64, flags, outputs, 8 * leaf);
+                        leaf += 1;
+                        p
+                    })
+                    .collect()
+            })
+            .collect();
+        let fills = segment
+            .fills
+            .iter()
+            .enumerate()
+            .map(|(k, ty)| {
+                let one: Vec<Value> = (0..components(*ty))
+                    .map(|c| {
+                        let offset = (16 * k + 4 * c) as i32;
+                        self.b.ins().load(scalar_type(*ty), flags, params, offset)
+                    })
+                    .collect();
+                self.width = BLOCK;
+                let block = one
+                    .iter()
+                    .map(|&scalar| match ty {
+                        ElemType::Bool => {
+                            let wide = self.b.ins().uextend(types::I32, scalar);
+                            let mask = self.b.ins().ineg(wide);
+                            self.widen(mask)
+                        }
+                        _ => self.widen(scalar),
+                    })
+                    .collect();
+                self.width = 1;
+                (
+                    Val::Prim { components: one },
+                    Val::Prim { components: block },
+                )
+            })
+            .collect();
+        Invariants {
+            elementwise,
+            gathered,
+            limits,
+            outputs,
+            fills,
+            first,
+        }
+    }
+
+    /// One iteration: the segment's steps over `self.width` elements from
+    /// `self.position`, and the stores of its outputs.
+    fn body(&mut self, segment: &Segment, invariants: &Invariants) -> Result<(), String> {
+        self.values.clear();
+        self.gathered_places.clear();
+        for (k, (var, ty)) in segment.elementwise.iter().enumerate() {
+            let places = Places::From(self.position);
+            let val = self.at(*ty, &invariants.elementwise[k], places);
+            self.values.insert(var.0, val);
+        }
+        for step in &segment.steps {
+            let val = match step {
+                SegmentStep::Iota { .. } => {
+                    let index = self.iota(invariants.first);
+                    Val::Prim {
+                        components: vec![index],
+                    }
+                }
+                SegmentStep::Fill { fill, .. } => {
+                    let (one, block) = &invariants.fills[*fill];
+                    if self.width == 1 { one } else { block }.clone()
+                }
+                SegmentStep::Field { record, field, .. } => self.field(*record, *field)?,
+                SegmentStep::Gather {
+                    index, gathered: g, ..
+                } => {
+                    let places = match self.gathered_places.get(index) {
+                        Some(places) => places.clone(),
+                        None => {
+                            let limit = invariants.limits.get(index).ok_or("a gather's limit")?;
+                            let index_value = self.prim(*index)?[0];
+                            let places = self.gathered_places(index_value, limit);
+                            self.gathered_places.insert(*index, places.clone());
+                            places
+                        }
+                    };
+                    let leaves = &invariants.gathered[*g];
+                    self.at(segment.gathered[*g].1, leaves, places)
+                }
+                SegmentStep::Map {
+                    functor,
+                    inputs,
+                    output_type,
+                    named,
+                    ..
+                } => self.map(functor, inputs, *output_type, named)?,
+            };
+            self.values.insert(step.output().0, val);
+        }
+        if let Some(valid) = self.valid.take() {
+            let next = self.b.create_block();
+            let position = self.position.into();
+            self.b.ins().brif(valid, next, &[], self.fail, &[position]);
+            self.b.switch_to_block(next);
+        }
+        for ((var, ty), pointers) in segment.outputs.iter().zip(&invariants.outputs) {
+            let val = self
+                .values
+                .get(&var.0)
+                .cloned()
+                .ok_or("an unknown output")?;
+            self.store(*ty, val, pointers)?;
+        }
+        Ok(())
+    }
+
+    /// The iteration's elements' indices in the whole array (u32, wrapping).
+    fn iota(&mut self, first: Value) -> Value {
+        let start = self.b.ins().iadd(first, self.position);
+        let start = self.b.ins().ireduce(types::I32, start);
+        if self.width == 1 {
+            return start;
+        }
+        let starts = self.widen(start);
+        let offsets: Vec<u8> = (0..BLOCK).flat_map(u32::to_le_bytes).collect();
+        let offsets = self
+            .b
+            .func
+            .dfg
+            .constants
+            .insert(ConstantData::from(offsets));
+        let offsets = self.b.ins().vconst(types::I32X4, offsets);
+        self.b.ins().iadd(starts, offsets)
+    }
+
+    /// The positions of a gather's `index` (u32 per element). One out of
+    /// range makes the iteration fail; its position is replaced by 0, so
+    /// that every load stays inside the array (the kernel's entry made sure
+    /// that none it gathers from is empty).
+    fn gathered_places(&mut self, index: Value, limit: &IndexLimit) -> Places {
+        if self.width == 1 {
+            let position = self.b.ins().uextend(types::I64, index);
+            let inside = self
+                .b
+                .ins()
+                .icmp(IntCC::UnsignedLessThan, position, limit.len);
+            self.require(inside);
+            let zero = self.b.ins().iconst(types::I64, 0);
+            return Places::Each(vec![self.b.ins().select(inside, position, zero)]);
+        }
+        let bound = self.widen(limit.len_u32);
+        let inside = self.b.ins().icmp(IntCC::UnsignedLessThan, index, bound);
+        let all_inside = self.b.ins().vall_true(inside);
+        self.require(all_inside);
+        let zero = self.i32(0);
+        let clamped = self.choose(inside, index, zero);
+        let positions = self
+            .elements(clamped)
+            .into_iter()
+            .map(|index| self.b.ins().uextend(types::I64, index))
+            .collect();
+        Places::Each(positions)
+    }
+
+    /// The elements at `places` of the column(s) `leaves` of type `ty`:
+    /// loaded now for a primitive, left to its fields' reads for a record.
+    fn at(&mut self, ty: ElemType, leaves: &[Value], places: Places) -> Val {
         match ty {
             ElemType::Record(id) => Val::Record {
                 fields: self
@@ -376,80 +662,148 @@ impl Emitter<'_, '_> {
                     .zip(leaves)
                     .map(|((_, t), p)| (*t, *p))
                     .collect(),
-                index,
+                places,
             },
             primitive => Val::Prim {
-                lanes: self.load(primitive, leaves[0], index),
+                components: self.load(primitive, leaves[0], &places),
             },
         }
     }
 
-    fn address(&mut self, ty: ElemType, base: Value, index: Value) -> Value {
+    fn address(&mut self, ty: ElemType, base: Value, position: Value) -> Value {
         let offset = self
             .b
             .ins()
-            .imul_imm_s(index, ty.bytes(self.records) as i64);
+            .imul_imm_s(position, ty.bytes(self.records) as i64);
         self.b.ins().iadd(base, offset)
     }
 
-    fn load(&mut self, ty: ElemType, base: Value, index: Value) -> Vec<Value> {
-        let address = self.address(ty, base, index);
-        (0..lanes(ty))
-            .map(|lane| {
-                self.b.ins().load(
-                    lane_type(ty),
-                    MemFlagsData::trusted(),
-                    address,
-                    4 * lane as i32,
-                )
+    /// Each element's position.
+    fn positions(&mut self, places: &Places) -> Vec<Value> {
+        match places {
+            Places::From(first) => (0..self.width)
+                .map(|e| match e {
+                    0 => *first,
+                    _ => self.b.ins().iadd_imm_s(*first, i64::from(e)),
+                })
+                .collect(),
+            Places::Each(positions) => positions.clone(),
+        }
+    }
+
+    /// Whether a block's elements of `ty` move as one vector: consecutive
+    /// scalars (bools are bytes, vectors' components interleaved).
+    fn moves_whole(&self, ty: ElemType, places: &Places) -> Option<Value> {
+        match places {
+            Places::From(first)
+                if self.width > 1 && components(ty) == 1 && ty != ElemType::Bool =>
+            {
+                Some(*first)
+            }
+            _ => None,
+        }
+    }
+
+    fn load(&mut self, ty: ElemType, base: Value, places: &Places) -> Vec<Value> {
+        if let Some(first) = self.moves_whole(ty, places) {
+            let address = self.address(ty, base, first);
+            let vector = self.value_type(ty);
+            return vec![self.b.ins().load(vector, input_flags(true), address, 0)];
+        }
+        let addresses: Vec<Value> = self
+            .positions(places)
+            .into_iter()
+            .map(|position| self.address(ty, base, position))
+            .collect();
+        let flags = input_flags(false);
+        (0..components(ty))
+            .map(|c| {
+                let offset = 4 * c as i32;
+                let scalars = addresses
+                    .iter()
+                    .map(|&address| match (ty, self.width) {
+                        (ElemType::Bool, 1) => self.b.ins().load(types::I8, flags, address, 0),
+                        (ElemType::Bool, _) => {
+                            let byte = self.b.ins().uload8(types::I32, flags, address, 0);
+                            self.b.ins().ineg(byte)
+                        }
+                        _ => self.b.ins().load(scalar_type(ty), flags, address, offset),
+                    })
+                    .collect();
+                self.assemble(scalars)
             })
             .collect()
     }
 
     fn store(&mut self, ty: ElemType, val: Val, pointers: &[Value]) -> Result<(), String> {
-        let position = self.position;
+        let places = Places::From(self.position);
         match val {
-            Val::Prim { lanes, .. } => {
-                let address = self.address(ty, pointers[0], position);
-                for (lane, value) in lanes.into_iter().enumerate() {
+            Val::Prim { components } => {
+                if let Some(first) = self.moves_whole(ty, &places) {
+                    let address = self.address(ty, pointers[0], first);
                     self.b
                         .ins()
-                        .store(MemFlagsData::trusted(), value, address, 4 * lane as i32);
+                        .store(vector_flags(), components[0], address, 0);
+                    return Ok(());
+                }
+                let addresses: Vec<Value> = self
+                    .positions(&places)
+                    .into_iter()
+                    .map(|position| self.address(ty, pointers[0], position))
+                    .collect();
+                for (c, component) in components.into_iter().enumerate() {
+                    for (address, element) in addresses.iter().zip(self.elements(component)) {
+                        // A block's bool lane is a mask: stored as the byte 0 or 1.
+                        let element = match ty == ElemType::Bool && self.width > 1 {
+                            true => {
+                                let bit = self.b.ins().band_imm_s(element, 1);
+                                self.b.ins().ireduce(types::I8, bit)
+                            }
+                            false => element,
+                        };
+                        self.b.ins().store(
+                            MemFlagsData::trusted(),
+                            element,
+                            *address,
+                            4 * c as i32,
+                        );
+                    }
                 }
             }
-            Val::Record { fields, index } => {
+            Val::Record { fields, places } => {
                 for ((field_ty, base), pointer) in fields.into_iter().zip(pointers) {
-                    let lanes = self.load(field_ty, base, index);
-                    self.store(field_ty, Val::Prim { lanes }, &[*pointer])?;
+                    let components = self.load(field_ty, base, &places);
+                    self.store(field_ty, Val::Prim { components }, &[*pointer])?;
                 }
             }
         }
         Ok(())
     }
 
-    /// Continues where `holds` (an i8 truth value) is true; fails otherwise.
-    fn check(&mut self, holds: Value) {
-        let next = self.b.create_block();
-        self.b
-            .ins()
-            .brif(holds, next, &[], self.fail, &[self.position.into()]);
-        self.b.switch_to_block(next);
+    /// Makes the iteration fail, at its end, unless `holds` (an i8 truth
+    /// value) is true: one branch per iteration, not one per check, keeps
+    /// the body one block of straight-line code.
+    fn require(&mut self, holds: Value) {
+        self.valid = Some(match self.valid {
+            Some(valid) => self.b.ins().band(valid, holds),
+            None => holds,
+        });
     }
 
     fn prim(&self, var: u32) -> Result<Vec<Value>, String> {
         match self.values.get(&var) {
-            Some(Val::Prim { lanes, .. }) => Ok(lanes.clone()),
+            Some(Val::Prim { components }) => Ok(components.clone()),
             _ => Err(format!("value {var} is not a primitive of the segment")),
         }
     }
 
     fn field(&mut self, record: u32, field: usize) -> Result<Val, String> {
-        let Some(Val::Record { fields, index }) = self.values.get(&record).cloned() else {
+        let Some(Val::Record { fields, places }) = self.values.get(&record).cloned() else {
             return Err(format!("value {record} is not a record of the segment"));
         };
         let (ty, base) = fields[field];
         Ok(Val::Prim {
-            lanes: self.load(ty, base, index),
+            components: self.load(ty, base, &places),
         })
     }
 
@@ -465,37 +819,157 @@ impl Emitter<'_, '_> {
             .map(|(v, _)| self.prim(*v))
             .collect::<Result<_, _>>()?;
         let ty = inputs[0].1;
-        let lanes = self.operation(functor, ty, &args, named)?;
-        if lanes.len() != self::lanes(output) {
+        let components = self.operation(functor, ty, &args, named)?;
+        if components.len() != self::components(output) {
             return Err(format!(
-                "`{functor}` gave {} lanes for {output:?}",
-                lanes.len()
+                "`{functor}` gave {} components for {output:?}",
+                components.len()
             ));
         }
-        Ok(Val::Prim { lanes })
+        Ok(Val::Prim { components })
     }
 
-    /// `op` applied to each lane of `args` (all of `ty`'s shape).
-    fn per_lane(
+    /// The type of one component of `ty` for the iteration's elements.
+    fn value_type(&self, ty: ElemType) -> Type {
+        match (ty, self.width) {
+            (_, 1) => scalar_type(ty),
+            (ElemType::Bool, _) => types::I32X4,
+            _ => scalar_type(ty).by(self.width).unwrap_or(types::INVALID),
+        }
+    }
+
+    /// `scalar` for every element of the iteration.
+    fn widen(&mut self, scalar: Value) -> Value {
+        if self.width == 1 {
+            return scalar;
+        }
+        let ty = self.b.func.dfg.value_type(scalar);
+        let vector = ty.by(self.width).unwrap_or(types::INVALID);
+        self.b.ins().splat(vector, scalar)
+    }
+
+    /// A component's value for each element: itself, or a block's lanes.
+    fn elements(&mut self, value: Value) -> Vec<Value> {
+        if self.width == 1 {
+            return vec![value];
+        }
+        (0..self.width)
+            .map(|e| self.b.ins().extractlane(value, e as u8))
+            .collect()
+    }
+
+    /// The value whose elements are `scalars` (the inverse of [`Self::elements`]).
+    fn assemble(&mut self, scalars: Vec<Value>) -> Value {
+        if self.width == 1 {
+            return scalars[0];
+        }
+        let ty = self.b.func.dfg.value_type(scalars[0]);
+        let vector = ty.by(self.width).unwrap_or(types::INVALID);
+        let mut value = self.b.ins().scalar_to_vector(vector, scalars[0]);
+        for (e, scalar) in scalars.into_iter().enumerate().skip(1) {
+            value = self.b.ins().insertlane(value, scalar, e as u8);
+        }
+        value
+    }
+
+    /// `op` of one element's scalars, for each element of the iteration:
+    /// for what has no vector instruction.
+    fn each_element(
+        &mut self,
+        args: &[Value],
+        mut op: impl FnMut(&mut Self, &[Value]) -> Value,
+    ) -> Value {
+        if self.width == 1 {
+            return op(self, args);
+        }
+        let per_arg: Vec<Vec<Value>> = args.iter().map(|&a| self.elements(a)).collect();
+        let width = self.width;
+        self.width = 1;
+        let mut results = Vec::new();
+        for e in 0..width as usize {
+            let scalars: Vec<Value> = per_arg.iter().map(|lanes| lanes[e]).collect();
+            results.push(op(self, &scalars));
+        }
+        self.width = width;
+        self.assemble(results)
+    }
+
+    /// `op` applied to each component of `args` (all of `ty`'s shape).
+    fn per_component(
         &mut self,
         args: &[Vec<Value>],
         mut op: impl FnMut(&mut Self, &[Value]) -> Value,
     ) -> Vec<Value> {
         (0..args[0].len())
-            .map(|lane| {
-                let lane_args: Vec<Value> = args.iter().map(|a| a[lane]).collect();
-                op(self, &lane_args)
+            .map(|c| {
+                let component_args: Vec<Value> = args.iter().map(|a| a[c]).collect();
+                op(self, &component_args)
             })
             .collect()
     }
 
     fn f32(&mut self, value: f32) -> Value {
-        self.b.ins().f32const(value)
+        let scalar = self.b.ins().f32const(value);
+        self.widen(scalar)
     }
 
+    fn i32(&mut self, value: i32) -> Value {
+        let scalar = self.b.ins().iconst(types::I32, i64::from(value));
+        self.widen(scalar)
+    }
+
+    /// `a` where `condition` (a bool) holds, else `b`.
+    fn choose(&mut self, condition: Value, a: Value, b: Value) -> Value {
+        if self.width == 1 {
+            return self.b.ins().select(condition, a, b);
+        }
+        let ty = self.b.func.dfg.value_type(a);
+        let mask = match ty == types::I32X4 {
+            true => condition,
+            false => {
+                let little = MemFlagsData::new().with_endianness(Endianness::Little);
+                self.b.ins().bitcast(ty, little, condition)
+            }
+        };
+        self.b.ins().bitselect(mask, a, b)
+    }
+
+    /// A bool as the integer 0 or 1.
+    fn bool_to_int(&mut self, x: Value) -> Value {
+        if self.width == 1 {
+            return self.b.ins().uextend(types::I32, x);
+        }
+        let one = self.i32(1);
+        self.b.ins().band(x, one)
+    }
+
+    /// The libm function `name` of `args` (f32 values, one per argument).
     fn call(&mut self, name: &str, args: &[Value]) -> Value {
-        let call = self.b.ins().call(self.calls[name], args);
-        self.b.inst_results(call)[0]
+        let (element, block) = self.calls[name];
+        if self.width == 1 {
+            let call = self.b.ins().call(element, args);
+            return self.b.inst_results(call)[0];
+        }
+        // The block's function reads its arguments from the stack slot's
+        // first vectors and writes its result into the next one.
+        let flags = MemFlagsData::trusted();
+        let mut pointers = Vec::new();
+        for (k, arg) in args.iter().enumerate() {
+            let pointer = self
+                .b
+                .ins()
+                .stack_addr(types::I64, self.call_slot, (16 * k) as i32);
+            self.b.ins().store(flags, *arg, pointer, 0);
+            pointers.push(pointer);
+        }
+        let result_offset = (16 * args.len()) as i32;
+        let result = self
+            .b
+            .ins()
+            .stack_addr(types::I64, self.call_slot, result_offset);
+        pointers.push(result);
+        self.b.ins().call(block, &pointers);
+        self.b.ins().load(types::F32X4, flags, result, 0)
     }
 
     /// Rust's `f32::min` / `f32::max` (LLVM's `minnum`/`maxnum` on x86):
@@ -507,15 +981,15 @@ impl Emitter<'_, '_> {
             FloatCC::GreaterThan
         };
         let b_better = self.b.ins().fcmp(better, b, a);
-        let chosen = self.b.ins().select(b_better, b, a);
+        let chosen = self.choose(b_better, b, a);
         let a_nan = self.b.ins().fcmp(FloatCC::Unordered, a, a);
-        self.b.ins().select(a_nan, b, chosen)
+        self.choose(a_nan, b, chosen)
     }
 
     fn sum_of_products(&mut self, a: &[Value], b: &[Value]) -> Value {
         let mut sum = self.b.ins().fmul(a[0], b[0]);
-        for lane in 1..a.len() {
-            let product = self.b.ins().fmul(a[lane], b[lane]);
+        for c in 1..a.len() {
+            let product = self.b.ins().fmul(a[c], b[c]);
             sum = self.b.ins().fadd(sum, product);
         }
         sum
@@ -531,19 +1005,23 @@ impl Emitter<'_, '_> {
         use ElemType::{Bool, F32, I32, U32};
         let float = !matches!(ty, Bool | U32 | I32);
         Ok(match functor {
-            "add" if float => self.per_lane(args, |s, x| s.b.ins().fadd(x[0], x[1])),
-            "sub" if float => self.per_lane(args, |s, x| s.b.ins().fsub(x[0], x[1])),
-            "mul" if float => self.per_lane(args, |s, x| s.b.ins().fmul(x[0], x[1])),
-            "div" if float => self.per_lane(args, |s, x| s.b.ins().fdiv(x[0], x[1])),
-            "add" => self.per_lane(args, |s, x| s.b.ins().iadd(x[0], x[1])),
-            "sub" => self.per_lane(args, |s, x| s.b.ins().isub(x[0], x[1])),
-            "mul" => self.per_lane(args, |s, x| s.b.ins().imul(x[0], x[1])),
-            "div" | "rem" if !float || ty == F32 => {
-                vec![self.integer_division(functor, ty, args[0][0], args[1][0])]
+            "add" if float => self.per_component(args, |s, x| s.b.ins().fadd(x[0], x[1])),
+            "sub" if float => self.per_component(args, |s, x| s.b.ins().fsub(x[0], x[1])),
+            "mul" if float => self.per_component(args, |s, x| s.b.ins().fmul(x[0], x[1])),
+            "div" if float => self.per_component(args, |s, x| s.b.ins().fdiv(x[0], x[1])),
+            "add" => self.per_component(args, |s, x| s.b.ins().iadd(x[0], x[1])),
+            "sub" => self.per_component(args, |s, x| s.b.ins().isub(x[0], x[1])),
+            "mul" => self.per_component(args, |s, x| s.b.ins().imul(x[0], x[1])),
+            "rem" if ty == F32 => vec![self.float_remainder(args[0][0], args[1][0])],
+            "div" | "rem" if !float => {
+                let operands = [args[0][0], args[1][0]];
+                vec![self.each_element(&operands, |s, x| {
+                    s.integer_division(functor, ty, x[0], x[1])
+                })]
             }
             "min" | "max" if float => {
                 let smaller = functor == "min";
-                self.per_lane(args, |s, x| s.nan_ignoring(x[0], x[1], smaller))
+                self.per_component(args, |s, x| s.nan_ignoring(x[0], x[1], smaller))
             }
             "min" if ty == U32 => vec![self.b.ins().umin(args[0][0], args[1][0])],
             "max" if ty == U32 => vec![self.b.ins().umax(args[0][0], args[1][0])],
@@ -551,18 +1029,19 @@ impl Emitter<'_, '_> {
             "max" => vec![self.b.ins().smax(args[0][0], args[1][0])],
             "and" => vec![self.b.ins().band(args[0][0], args[1][0])],
             "or" => vec![self.b.ins().bor(args[0][0], args[1][0])],
-            "not" => vec![self.b.ins().bxor_imm_u(args[0][0], 1)],
-            "neg" if float => self.per_lane(args, |s, x| s.b.ins().fneg(x[0])),
+            "not" if self.width == 1 => vec![self.b.ins().bxor_imm_u(args[0][0], 1)],
+            "not" => vec![self.b.ins().bnot(args[0][0])],
+            "neg" if float => self.per_component(args, |s, x| s.b.ins().fneg(x[0])),
             "neg" => vec![self.b.ins().ineg(args[0][0])],
-            "abs" => self.per_lane(args, |s, x| s.b.ins().fabs(x[0])),
-            "floor" => self.per_lane(args, |s, x| s.b.ins().floor(x[0])),
-            "ceil" => self.per_lane(args, |s, x| s.b.ins().ceil(x[0])),
-            "sqrt" => self.per_lane(args, |s, x| s.b.ins().sqrt(x[0])),
-            "fract" => self.per_lane(args, |s, x| {
+            "abs" => self.per_component(args, |s, x| s.b.ins().fabs(x[0])),
+            "floor" => self.per_component(args, |s, x| s.b.ins().floor(x[0])),
+            "ceil" => self.per_component(args, |s, x| s.b.ins().ceil(x[0])),
+            "sqrt" => self.per_component(args, |s, x| s.b.ins().sqrt(x[0])),
+            "fract" => self.per_component(args, |s, x| {
                 let floor = s.b.ins().floor(x[0]);
                 s.b.ins().fsub(x[0], floor)
             }),
-            "rsqrt" => self.per_lane(args, |s, x| {
+            "rsqrt" => self.per_component(args, |s, x| {
                 let one = s.f32(1.0);
                 let root = s.b.ins().sqrt(x[0]);
                 s.b.ins().fdiv(one, root)
@@ -570,32 +1049,32 @@ impl Emitter<'_, '_> {
             "exp" | "log" | "sin" | "cos" => {
                 let name = UNARY_CALLS
                     .iter()
-                    .find(|(n, _)| *n == functor)
-                    .map(|(n, _)| *n)
+                    .find(|(n, _, _)| *n == functor)
+                    .map(|(n, _, _)| *n)
                     .ok_or("an unknown call")?;
-                self.per_lane(args, |s, x| s.call(name, &[x[0]]))
+                self.per_component(args, |s, x| s.call(name, &[x[0]]))
             }
-            "pow" => self.per_lane(args, |s, x| s.call("pow", &[x[0], x[1]])),
+            "pow" => self.per_component(args, |s, x| s.call("pow", &[x[0], x[1]])),
             // `x.max(lo).min(hi)`.
-            "clamp" => self.per_lane(args, |s, x| {
+            "clamp" => self.per_component(args, |s, x| {
                 let low = s.nan_ignoring(x[0], x[1], false);
                 s.nan_ignoring(low, x[2], true)
             }),
             // `a * (1.0 - t) + b * t`.
-            "mix" => self.per_lane(args, |s, x| {
+            "mix" => self.per_component(args, |s, x| {
                 let one = s.f32(1.0);
                 let rest = s.b.ins().fsub(one, x[2]);
                 let left = s.b.ins().fmul(x[0], rest);
                 let right = s.b.ins().fmul(x[1], x[2]);
                 s.b.ins().fadd(left, right)
             }),
-            "step" => self.per_lane(args, |s, x| {
+            "step" => self.per_component(args, |s, x| {
                 let reached = s.b.ins().fcmp(FloatCC::LessThanOrEqual, x[0], x[1]);
                 let (one, zero) = (s.f32(1.0), s.f32(0.0));
-                s.b.ins().select(reached, one, zero)
+                s.choose(reached, one, zero)
             }),
             // `t = ((x - lo) / (hi - lo)).max(0.0).min(1.0); t * t * (3.0 - 2.0 * t)`.
-            "smoothstep" => self.per_lane(args, |s, x| {
+            "smoothstep" => self.per_component(args, |s, x| {
                 let above = s.b.ins().fsub(x[2], x[0]);
                 let span = s.b.ins().fsub(x[1], x[0]);
                 let q = s.b.ins().fdiv(above, span);
@@ -613,7 +1092,7 @@ impl Emitter<'_, '_> {
                 vec![self.b.ins().sqrt(squared)]
             }
             "distance" => {
-                let d = self.per_lane(args, |s, x| s.b.ins().fsub(x[0], x[1]));
+                let d = self.per_component(args, |s, x| s.b.ins().fsub(x[0], x[1]));
                 let squared = self.sum_of_products(&d, &d);
                 vec![self.b.ins().sqrt(squared)]
             }
@@ -622,9 +1101,9 @@ impl Emitter<'_, '_> {
                 let length = self.b.ins().sqrt(squared);
                 let zero = self.f32(0.0);
                 let vanishes = self.b.ins().fcmp(FloatCC::Equal, length, zero);
-                self.per_lane(args, |s, x| {
+                self.per_component(args, |s, x| {
                     let scaled = s.b.ins().fdiv(x[0], length);
-                    s.b.ins().select(vanishes, zero, scaled)
+                    s.choose(vanishes, zero, scaled)
                 })
             }
             // `i - (2.0 * dot(n, i)) * n`.
@@ -632,7 +1111,7 @@ impl Emitter<'_, '_> {
                 let dot = self.sum_of_products(&args[1], &args[0]);
                 let two = self.f32(2.0);
                 let twice = self.b.ins().fmul(two, dot);
-                self.per_lane(args, |s, x| {
+                self.per_component(args, |s, x| {
                     let along = s.b.ins().fmul(twice, x[1]);
                     s.b.ins().fsub(x[0], along)
                 })
@@ -666,7 +1145,7 @@ impl Emitter<'_, '_> {
             "isZero" | "nonZero" => {
                 let zero = match ty {
                     F32 => self.f32(0.0),
-                    _ => self.b.ins().iconst(types::I32, 0),
+                    _ => self.i32(0),
                 };
                 let relation = if functor == "isZero" { "eq" } else { "ne" };
                 vec![self.compare(relation, ty, args[0][0], zero)?]
@@ -675,7 +1154,7 @@ impl Emitter<'_, '_> {
             "select" => {
                 let condition = args[0][0];
                 (0..args[1].len())
-                    .map(|lane| self.b.ins().select(condition, args[1][lane], args[2][lane]))
+                    .map(|c| self.choose(condition, args[1][c], args[2][c]))
                     .collect()
             }
             "identity" => args[0].clone(),
@@ -683,33 +1162,37 @@ impl Emitter<'_, '_> {
         })
     }
 
-    /// `div` and `rem` of integers (wrapping, failing on a zero divisor) and
-    /// `rem` of floats (`a - b * trunc(a / b)`).
+    /// `rem` of floats: `a - b * trunc(a / b)`.
+    fn float_remainder(&mut self, a: Value, b: Value) -> Value {
+        let quotient = self.b.ins().fdiv(a, b);
+        let truncated = self.b.ins().trunc(quotient);
+        let product = self.b.ins().fmul(b, truncated);
+        self.b.ins().fsub(a, product)
+    }
+
+    /// `div` and `rem` of integers of one element: wrapping; a zero divisor
+    /// makes the iteration fail (and is replaced by 1, as division by zero
+    /// traps in hardware).
     fn integer_division(&mut self, functor: &str, ty: ElemType, a: Value, b: Value) -> Value {
         let rem = functor == "rem";
+        let nonzero = self.b.ins().icmp_imm_u(IntCC::NotEqual, b, 0);
+        self.require(nonzero);
+        let one = self.b.ins().iconst(types::I32, 1);
         match ty {
-            ElemType::F32 => {
-                let quotient = self.b.ins().fdiv(a, b);
-                let truncated = self.b.ins().trunc(quotient);
-                let product = self.b.ins().fmul(b, truncated);
-                self.b.ins().fsub(a, product)
-            }
             ElemType::U32 => {
-                let nonzero = self.b.ins().icmp_imm_u(IntCC::NotEqual, b, 0);
-                self.check(nonzero);
+                let divisor = self.b.ins().select(nonzero, b, one);
                 match rem {
-                    true => self.b.ins().urem(a, b),
-                    false => self.b.ins().udiv(a, b),
+                    true => self.b.ins().urem(a, divisor),
+                    false => self.b.ins().udiv(a, divisor),
                 }
             }
             _ => {
-                let nonzero = self.b.ins().icmp_imm_s(IntCC::NotEqual, b, 0);
-                self.check(nonzero);
-                // `i32::MIN / -1` traps in hardware: divide by 1 instead, which
-                // gives `wrapping_rem`'s 0, and negate for `wrapping_div`.
+                // `i32::MIN / -1` traps in hardware too: divide by 1 instead,
+                // which gives `wrapping_rem`'s 0, and negate for `wrapping_div`.
                 let minus_one = self.b.ins().icmp_imm_s(IntCC::Equal, b, -1);
-                let one = self.b.ins().iconst(types::I32, 1);
-                let divisor = self.b.ins().select(minus_one, one, b);
+                let zero = self.b.ins().icmp_imm_u(IntCC::Equal, b, 0);
+                let unusable = self.b.ins().bor(minus_one, zero);
+                let divisor = self.b.ins().select(unusable, one, b);
                 if rem {
                     self.b.ins().srem(a, divisor)
                 } else {
@@ -765,25 +1248,25 @@ impl Emitter<'_, '_> {
     /// The generic conversions: bool is 0 or 1; out of range saturates; NaN is 0.
     fn convert(&mut self, to: &str, from: ElemType, x: Value) -> Result<Value, String> {
         use ElemType::{Bool, F32, I32, U32};
-        let b = &mut self.b;
+        let (float, integer) = (self.value_type(F32), self.value_type(U32));
         Ok(match (from, to) {
             (Bool, "toF32") => {
-                let wide = b.ins().uextend(types::I32, x);
-                b.ins().fcvt_from_uint(types::F32, wide)
+                let bit = self.bool_to_int(x);
+                self.b.ins().fcvt_from_sint(float, bit)
             }
-            (Bool, _) => b.ins().uextend(types::I32, x),
-            (U32, "toF32") => b.ins().fcvt_from_uint(types::F32, x),
-            (I32, "toF32") => b.ins().fcvt_from_sint(types::F32, x),
+            (Bool, _) => self.bool_to_int(x),
+            (U32, "toF32") => self.b.ins().fcvt_from_uint(float, x),
+            (I32, "toF32") => self.b.ins().fcvt_from_sint(float, x),
             (U32, "toI32") => {
-                let most = b.ins().iconst(types::I32, i64::from(i32::MAX));
-                b.ins().umin(x, most)
+                let most = self.i32(i32::MAX);
+                self.b.ins().umin(x, most)
             }
             (I32, "toU32") => {
-                let zero = b.ins().iconst(types::I32, 0);
-                b.ins().smax(x, zero)
+                let zero = self.i32(0);
+                self.b.ins().smax(x, zero)
             }
-            (F32, "toU32") => b.ins().fcvt_to_uint_sat(types::I32, x),
-            (F32, "toI32") => b.ins().fcvt_to_sint_sat(types::I32, x),
+            (F32, "toU32") => self.b.ins().fcvt_to_uint_sat(integer, x),
+            (F32, "toI32") => self.b.ins().fcvt_to_sint_sat(integer, x),
             (U32 | I32 | F32, _) => x,
             (other, _) => return Err(format!("no conversion of {other:?}")),
         })
