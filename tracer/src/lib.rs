@@ -31,7 +31,7 @@ pub use shading::{PointLight, SceneFile, Shading, ShadingError, ShadingOverrides
 use dpp_runtime::{ElemType, FunctorLibrary, HostType, HostValue, RecordId, RecordType, Uniforms};
 
 /// The uniform fields the tracer fills, by record: `(record, field, type)`.
-pub const UNIFORM_FIELDS: [(&str, &str, HostType); 15] = [
+pub const UNIFORM_FIELDS: [(&str, &str, HostType); 16] = [
     ("camera", "width", HostType::Int),
     ("camera", "height", HostType::Int),
     ("camera", "pixels", HostType::Int),
@@ -46,6 +46,7 @@ pub const UNIFORM_FIELDS: [(&str, &str, HostType); 15] = [
     ("scene", "center", HostType::Vec3),
     ("scene", "diagonal", HostType::Float),
     ("scene", "lights", HostType::Int),
+    ("scene", "materials", HostType::Int),
     ("scene", "background", HostType::Vec3),
 ];
 
@@ -149,7 +150,8 @@ pub fn functor_library() -> FunctorLibrary {
 }
 
 /// The uniform values of a scene seen through a camera and lit by `shading`
-/// (every field of [`UNIFORM_FIELDS`]; `scene.lights` is the number of lights).
+/// (every field of [`UNIFORM_FIELDS`]; `scene.lights` and `scene.materials`
+/// are the numbers of lights and materials).
 pub fn uniforms(scene: &TraceScene, camera: &CameraSetup, shading: &Shading) -> Uniforms {
     let mut uniforms = Uniforms::default();
     let view = &camera.camera;
@@ -175,6 +177,8 @@ pub fn uniforms(scene: &TraceScene, camera: &CameraSetup, shading: &Shading) -> 
     );
     let lights = shading.lights().len() as i64;
     uniforms.set("scene", "lights", HostValue::Int(lights));
+    let materials = shading.materials().len() as i64;
+    uniforms.set("scene", "materials", HostValue::Int(materials));
     uniforms.set("scene", "background", vec3(shading.background()));
     uniforms
 }
