@@ -926,10 +926,7 @@ impl Emitter<'_, '_> {
         let ty = self.b.func.dfg.value_type(a);
         let mask = match ty == types::I32X4 {
             true => condition,
-            false => {
-                let little = MemFlagsData::new().with_endianness(Endianness::Little);
-                self.b.ins().bitcast(ty, little, condition)
-            }
+            false => self.bitcast(ty, condition),
         };
         self.b.ins().bitselect(mask, a, b)
     }
@@ -1013,6 +1010,9 @@ impl Emitter<'_, '_> {
             "sub" => self.per_component(args, |s, x| s.b.ins().isub(x[0], x[1])),
             "mul" => self.per_component(args, |s, x| s.b.ins().imul(x[0], x[1])),
             "rem" if ty == F32 => vec![self.float_remainder(args[0][0], args[1][0])],
+            "div" | "rem" if ty == U32 && self.width > 1 => {
+                vec![self.unsigned_division_block(functor == "rem", args[0][0], args[1][0])]
+            }
             "div" | "rem" if !float => {
                 let operands = [args[0][0], args[1][0]];
                 vec![self.each_element(&operands, |s, x| {
@@ -1168,6 +1168,62 @@ impl Emitter<'_, '_> {
         let truncated = self.b.ins().trunc(quotient);
         let product = self.b.ins().fmul(b, truncated);
         self.b.ins().fsub(a, product)
+    }
+
+    /// `div` and `rem` of a block of u32s without the hardware's division,
+    /// which takes tens of cycles a lane (and the pair idiom's `k / lights`
+    /// and `k % lights` cost two per pair): each quotient is the truncated
+    /// f64 quotient, exact for 32-bit operands (its rounding error, below
+    /// 2^-21 / b, never reaches the next integer, at least 1 / b away), and
+    /// `rem` is `a - q * b`. A zero divisor makes the iteration fail.
+    fn unsigned_division_block(&mut self, rem: bool, a: Value, b: Value) -> Value {
+        let zero = self.i32(0);
+        let nonzero = self.b.ins().icmp(IntCC::NotEqual, b, zero);
+        let all_nonzero = self.b.ins().vall_true(nonzero);
+        self.require(all_nonzero);
+        // 2^52: added to an integer below 2^32, its low 32 bits are the integer's.
+        let magic = self.b.ins().f64const(4_503_599_627_370_496.0);
+        let magic = self.b.ins().splat(types::F64X2, magic);
+        let mut quotient_bits = Vec::new();
+        for high in [false, true] {
+            let [a, b] = [a, b].map(|v| {
+                let half = match high {
+                    true => self.shuffle_lanes(v, v, [2, 3, 0, 1]),
+                    false => v,
+                };
+                let wide = self.b.ins().uwiden_low(half);
+                self.b.ins().fcvt_from_uint(types::F64X2, wide)
+            });
+            let quotient = self.b.ins().fdiv(a, b);
+            let quotient = self.b.ins().trunc(quotient);
+            let shifted = self.b.ins().fadd(quotient, magic);
+            quotient_bits.push(self.bitcast(types::I32X4, shifted));
+        }
+        let quotient = self.shuffle_lanes(quotient_bits[0], quotient_bits[1], [0, 2, 4, 6]);
+        if !rem {
+            return quotient;
+        }
+        let product = self.b.ins().imul(quotient, b);
+        self.b.ins().isub(a, product)
+    }
+
+    /// Lanes of two 32-bit-lane vectors: `lanes[i]` picks lane `l` of `x`
+    /// for `l < 4`, else lane `l - 4` of `y`.
+    fn shuffle_lanes(&mut self, x: Value, y: Value, lanes: [u8; 4]) -> Value {
+        let ty = self.b.func.dfg.value_type(x);
+        let bytes: Vec<u8> = lanes
+            .iter()
+            .flat_map(|lane| (0..4).map(move |byte| 4 * lane + byte))
+            .collect();
+        let mask = self.b.func.dfg.immediates.push(ConstantData::from(bytes));
+        let [x, y] = [x, y].map(|v| self.bitcast(types::I8X16, v));
+        let shuffled = self.b.ins().shuffle(x, y, mask);
+        self.bitcast(ty, shuffled)
+    }
+
+    fn bitcast(&mut self, ty: Type, value: Value) -> Value {
+        let little = MemFlagsData::new().with_endianness(Endianness::Little);
+        self.b.ins().bitcast(ty, little, value)
     }
 
     /// `div` and `rem` of integers of one element: wrapping; a zero divisor
