@@ -865,7 +865,8 @@ impl Emitter<'_, '_> {
         }
         let ty = self.b.func.dfg.value_type(scalars[0]);
         let vector = ty.by(self.width).unwrap_or(types::INVALID);
-        let mut value = self.b.ins().scalar_to_vector(vector, scalars[0]);
+        // A splat is one instruction; a vector from a scalar clears the rest first.
+        let mut value = self.b.ins().splat(vector, scalars[0]);
         for (e, scalar) in scalars.into_iter().enumerate().skip(1) {
             value = self.b.ins().insertlane(value, scalar, e as u8);
         }
