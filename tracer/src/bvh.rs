@@ -607,6 +607,7 @@ const LEAF_BOX_CHUNK: usize = 1 << 16;
 
 /// Our binary layout without the vertices: nodes, the input triangle of each
 /// leaf-order position, and the depth of the deepest inner node.
+#[derive(Default)]
 struct BinaryTree {
     nodes: Vec<BvhNode>,
     triangle_ids: Vec<u32>,
@@ -633,16 +634,115 @@ enum Flattened {
 /// triangles in depth-first leaf order, and collapses leaves as it goes, as
 /// obvhs' `collapse` does: two sibling leaves become one when they hold at most
 /// [`MAX_LEAF_TRIANGLES`] and the SAH says one leaf costs no more than their
-/// parent and two leaves. One walk of the tree: obvhs' own collapse walks it
-/// several times and took over half as long as the PLOC build itself.
+/// parent and two leaves. One walk of the tree (obvhs' own collapse walks it
+/// several times and took over half as long as the PLOC build itself), its
+/// subtrees at depth [`PARALLEL_FLATTEN_DEPTH`] walked in parallel and then
+/// spliced, in order, into the walk of the levels above: the same tree as one
+/// walk on one thread gives.
 fn flatten(source: &[Bvh2Node], primitive_indices: &[u32]) -> BinaryTree {
+    let mut frontier = Vec::new();
+    let mut work = vec![(0u32, 1usize)];
+    while let Some((index, depth)) = work.pop() {
+        let node = &source[index as usize];
+        if node.is_leaf() {
+            continue;
+        }
+        if depth == PARALLEL_FLATTEN_DEPTH {
+            frontier.push(index);
+        } else {
+            work.extend([
+                (node.first_index + 1, depth + 1),
+                (node.first_index, depth + 1),
+            ]);
+        }
+    }
+    let mut parts = frontier
+        .par_iter()
+        .map(|&root| {
+            let mut part = BinaryTree::default();
+            let flattened = walk(
+                source,
+                primitive_indices,
+                (root, PARALLEL_FLATTEN_DEPTH),
+                &mut part,
+                &mut |_, _, _| None,
+            );
+            (part, flattened)
+        })
+        .collect::<Vec<_>>()
+        .into_iter();
     let mut tree = BinaryTree {
         nodes: Vec::with_capacity(source.len() / 2 + 1),
         triangle_ids: Vec::with_capacity(primitive_indices.len()),
         stack_depth: 1,
     };
-    // Post-order, left before right: (source node, its depth, children done).
-    let mut work = vec![(0u32, 1usize, false)];
+    // The walk meets the subtrees at that depth in the order they were found.
+    let root = walk(
+        source,
+        primitive_indices,
+        (0, 1),
+        &mut tree,
+        &mut |_, depth, tree| {
+            (depth == PARALLEL_FLATTEN_DEPTH).then(|| {
+                let (part, flattened) = parts.next().expect("a walked subtree");
+                splice(tree, part, flattened)
+            })
+        },
+    );
+    match root {
+        Flattened::Inner(_) => {
+            // Post-order put the root last; reversed, every parent comes before
+            // its children and the root is node 0.
+            let last = tree.nodes.len() as u32 - 1;
+            tree.nodes.reverse();
+            for node in &mut tree.nodes {
+                for child in node.children.iter_mut().filter(|child| child.count == 0) {
+                    child.index = last - child.index;
+                }
+            }
+        }
+        Flattened::Leaf { count, .. } => {
+            // A single-leaf tree still needs an inner node; split the leaf in two
+            // (a one-triangle leaf appears twice, which is harmless).
+            let root = source[0].aabb();
+            let first_half = count.div_ceil(2);
+            let half = |index: u32, count: u32| BvhChild {
+                min: root.min.to_array(),
+                index,
+                max: root.max.to_array(),
+                count,
+            };
+            let left = half(0, first_half);
+            let right = if count > first_half {
+                half(first_half, count - first_half)
+            } else {
+                left
+            };
+            tree.nodes.push(BvhNode {
+                children: [left, right],
+            });
+        }
+    }
+    tree
+}
+
+/// The depth (the root's is 1) of the subtrees [`flatten`] walks in parallel:
+/// up to 16 of them, enough to keep every core busy.
+const PARALLEL_FLATTEN_DEPTH: usize = 5;
+
+/// Walks the subtree at `(root, its depth)` in post-order, left first, appending
+/// its triangles and its inner nodes (numbered in post-order) to `tree`, and
+/// returns what it became. `splice(node, depth, tree)` may stand in for an inner
+/// node's whole subtree.
+fn walk(
+    source: &[Bvh2Node],
+    primitive_indices: &[u32],
+    (root, root_depth): (u32, usize),
+    tree: &mut BinaryTree,
+    splice: &mut impl FnMut(u32, usize, &mut BinaryTree) -> Option<Flattened>,
+) -> Flattened {
+    // (source node, its depth, children done)
+    let mut work = vec![(root, root_depth, false)];
     let mut done: Vec<Flattened> = Vec::new();
     while let Some((index, depth, children_done)) = work.pop() {
         let node = &source[index as usize];
@@ -659,6 +759,10 @@ fn flatten(source: &[Bvh2Node], primitive_indices: &[u32]) -> BinaryTree {
         }
         let first_child = node.first_index;
         if !children_done {
+            if let Some(flattened) = splice(index, depth, tree) {
+                done.push(flattened);
+                continue;
+            }
             work.extend([
                 (index, depth, true),
                 (first_child + 1, depth + 1, false),
@@ -710,42 +814,33 @@ fn flatten(source: &[Bvh2Node], primitive_indices: &[u32]) -> BinaryTree {
         });
         tree.stack_depth = tree.stack_depth.max(depth);
     }
-    match done.pop() {
-        Some(Flattened::Inner(_)) => {
-            // Post-order put the root last; reversed, every parent comes before
-            // its children and the root is node 0.
-            let last = tree.nodes.len() as u32 - 1;
-            tree.nodes.reverse();
-            for node in &mut tree.nodes {
-                for child in node.children.iter_mut().filter(|child| child.count == 0) {
-                    child.index = last - child.index;
-                }
-            }
-        }
-        _ => {
-            // A single-leaf tree still needs an inner node; split the leaf in two
-            // (a one-triangle leaf appears twice, which is harmless).
-            let root = source[0].aabb();
-            let count = tree.triangle_ids.len() as u32;
-            let first_half = count.div_ceil(2);
-            let half = |index: u32, count: u32| BvhChild {
-                min: root.min.to_array(),
-                index,
-                max: root.max.to_array(),
-                count,
-            };
-            let left = half(0, first_half);
-            let right = if count > first_half {
-                half(first_half, count - first_half)
+    done.pop().expect("the root is flattened")
+}
+
+/// Appends a subtree walked on its own to `tree`, where one walk would have put
+/// it: its node and triangle numbers shifted by what `tree` already holds.
+fn splice(tree: &mut BinaryTree, part: BinaryTree, flattened: Flattened) -> Flattened {
+    let node_offset = tree.nodes.len() as u32;
+    let triangle_offset = tree.triangle_ids.len() as u32;
+    tree.nodes.extend(part.nodes.into_iter().map(|mut node| {
+        for child in &mut node.children {
+            child.index += if child.count == 0 {
+                node_offset
             } else {
-                left
+                triangle_offset
             };
-            tree.nodes.push(BvhNode {
-                children: [left, right],
-            });
         }
+        node
+    }));
+    tree.triangle_ids.extend_from_slice(&part.triangle_ids);
+    tree.stack_depth = tree.stack_depth.max(part.stack_depth);
+    match flattened {
+        Flattened::Leaf { first, count } => Flattened::Leaf {
+            first: first + triangle_offset,
+            count,
+        },
+        Flattened::Inner(index) => Flattened::Inner(index + node_offset),
     }
-    tree
 }
 
 mod gpu;
