@@ -18,10 +18,13 @@
 
 use crate::mesh::{MeshError, TriangleMesh};
 use bytemuck::{Pod, Zeroable};
-use glam::{Vec3, Vec3A};
+use glam::Vec3;
+use obvhs::aabb::Aabb;
 use obvhs::bvh2::node::Bvh2Node;
-use obvhs::triangle::Triangle;
-use std::time::Duration;
+use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
+use obvhs::bvh2::Bvh2;
+use obvhs::ploc::{PlocBuilder, SortPrecision};
+use rayon::prelude::*;
 
 mod depth_limit;
 mod simd;
@@ -128,9 +131,9 @@ fn bvh_space_scale(mesh: &TriangleMesh) -> f32 {
 
 impl Bvh {
     /// Builds the hierarchy for a mesh (validated first). Uses obvhs' PLOC builder
-    /// with its `medium` preset; where its tree is deeper than [`MAX_STACK_DEPTH`],
-    /// the subtrees that reach past it are rebuilt by median split
-    /// (`bvh/depth_limit.rs`).
+    /// and reinsertion ([`ploc_tree`]), then collapses leaves while flattening;
+    /// where the tree is deeper than [`MAX_STACK_DEPTH`], the subtrees that reach
+    /// past it are rebuilt by median split (`bvh/depth_limit.rs`).
     pub fn build(mesh: &TriangleMesh) -> Result<Bvh, MeshError> {
         mesh.validate()?;
         let scale = bvh_space_scale(mesh);
@@ -151,10 +154,46 @@ impl Bvh {
     /// [`Bvh::build`] of a mesh whose coordinates need no scaling.
     fn build_unscaled(mesh: &TriangleMesh) -> Bvh {
         let tree = ploc_tree(mesh);
-        match depth_limit::limit_depth(&tree.nodes, &tree.primitive_indices, mesh, MAX_STACK_DEPTH)
-        {
-            None => flatten(&tree.nodes, &tree.primitive_indices, mesh),
-            Some((nodes, primitive_indices)) => flatten(&nodes, &primitive_indices, mesh),
+        let mut binary = flatten(&tree.nodes, &tree.primitive_indices);
+        // Checked on the flattened tree: too deep a tree is rare (PLOC's chains
+        // of tiny triangles), and finding out costs a walk of its own.
+        if binary.stack_depth > MAX_STACK_DEPTH {
+            if let Some((nodes, primitive_indices)) = depth_limit::limit_depth(
+                &tree.nodes,
+                &tree.primitive_indices,
+                mesh,
+                MAX_STACK_DEPTH,
+            ) {
+                binary = flatten(&nodes, &primitive_indices);
+            }
+        }
+        debug_assert!(
+            binary.stack_depth <= MAX_STACK_DEPTH,
+            "{}",
+            binary.stack_depth
+        );
+        Bvh::from_binary(binary, mesh)
+    }
+
+    /// Copies the triangles into leaf order (in parallel) and collapses the
+    /// eight-wide tree.
+    fn from_binary(binary: BinaryTree, mesh: &TriangleMesh) -> Bvh {
+        let triangles: Vec<BvhTriangle> = binary
+            .triangle_ids
+            .par_iter()
+            .map(|&id| {
+                let [v0, v1, v2] = mesh.triangle_vertices(id as usize).map(|v| v.to_array());
+                BvhTriangle { v0, v1, v2 }
+            })
+            .collect();
+        let wide = wide::WideBvh::build(&binary.nodes, &triangles);
+        Bvh {
+            nodes: binary.nodes,
+            triangles,
+            triangle_ids: binary.triangle_ids,
+            stack_depth: binary.stack_depth,
+            scale: 1.0,
+            wide,
         }
     }
 
@@ -508,110 +547,300 @@ impl PreparedRay {
     }
 }
 
-/// obvhs' PLOC tree of a mesh (`medium` preset).
-fn ploc_tree(mesh: &TriangleMesh) -> obvhs::bvh2::Bvh2 {
-    let triangles: Vec<Triangle> = (0..mesh.triangles.len())
-        .map(|i| {
-            let [v0, v1, v2] = mesh.triangle_vertices(i).map(Vec3A::from);
-            Triangle { v0, v1, v2 }
+/// obvhs' PLOC tree of a mesh, reinserted, with one triangle per leaf (leaves
+/// are collapsed by [`flatten`]). The parameters are obvhs' `fast` preset's
+/// with a little more reinsertion: on the test scenes its trees have the SAH
+/// cost of the `medium` preset's within 0.2% (docs/benchmarks.md) and build in
+/// less time. The leaves are made straight from the mesh, in parallel (obvhs'
+/// `build_bvh2_from_tris` copies every triangle first, and makes the leaves on
+/// one thread below 500k triangles).
+fn ploc_tree(mesh: &TriangleMesh) -> Bvh2 {
+    let leaves: Vec<Bvh2Node> = (0..mesh.triangles.len() as u32)
+        .into_par_iter()
+        .map(|id| Bvh2Node::new(depth_limit::triangle_box(mesh, id), 1, id))
+        .collect();
+    // Chunks of a fixed size, joined in order: the same box on any number of threads.
+    let chunk_boxes: Vec<Aabb> = leaves
+        .par_chunks(LEAF_BOX_CHUNK)
+        .map(|chunk| {
+            chunk
+                .iter()
+                .fold(Aabb::INVALID, |bounds, leaf| bounds.union(leaf.aabb()))
         })
         .collect();
-    let mut build_time = Duration::ZERO;
-    obvhs::bvh2::builder::build_bvh2_from_tris(
-        &triangles,
-        obvhs::BvhBuildParams::medium_build(),
-        &mut build_time,
-    )
+    let bounds = chunk_boxes
+        .iter()
+        .fold(Aabb::INVALID, |bounds, chunk| bounds.union(chunk));
+    let mut tree = Bvh2 {
+        primitive_indices: (0..mesh.triangles.len() as u32).collect(),
+        ..Bvh2::default()
+    };
+    let mut builder = PlocBuilder {
+        current_nodes: leaves,
+        ..PlocBuilder::new()
+    };
+    builder.build_ploc_from_leaves::<PLOC_SEARCH_DISTANCE, false>(
+        &mut tree,
+        bounds,
+        SortPrecision::U64,
+        PLOC_NEAREST_ONLY_PASSES,
+    );
+    ReinsertionOptimizer::default().run(&mut tree, REINSERTION_BATCH_RATIO, None);
+    tree
+}
+
+/// How many neighbours on each side PLOC looks at for a node's best partner
+/// (obvhs' `PlocSearchDistance::Low`; the `medium` preset's 14 builds slower
+/// and no better here).
+const PLOC_SEARCH_DISTANCE: usize = 6;
+
+/// PLOC's first passes look at the nearest neighbours only (cheaper while
+/// most nodes are still single triangles).
+const PLOC_NEAREST_ONLY_PASSES: usize = 2;
+
+/// The share of nodes that reinsertion tries to move to better places (the
+/// `fast` preset has 0.02, the `medium` one 0.05 and again after its collapse).
+const REINSERTION_BATCH_RATIO: f32 = 0.025;
+
+/// Leaves per chunk when their boxes are joined in parallel.
+const LEAF_BOX_CHUNK: usize = 1 << 16;
+
+/// Our binary layout without the vertices: nodes, the input triangle of each
+/// leaf-order position, and the depth of the deepest inner node.
+#[derive(Default)]
+struct BinaryTree {
+    nodes: Vec<BvhNode>,
+    triangle_ids: Vec<u32>,
+    stack_depth: usize,
+}
+
+/// Most triangles a collapsed leaf holds (obvhs' presets' `max_prims_per_leaf`).
+const MAX_LEAF_TRIANGLES: u32 = 8;
+
+/// The cost of a node visit against a triangle test in the collapse's SAH
+/// (obvhs' presets' `collapse_traversal_cost`).
+const COLLAPSE_TRAVERSAL_COST: f32 = 3.0;
+
+/// A flattened subtree: a leaf of triangles `first .. first + count` (leaf
+/// order), or our inner node (numbered in post-order until the end).
+#[derive(Clone, Copy)]
+enum Flattened {
+    Leaf { first: u32, count: u32 },
+    Inner(u32),
 }
 
 /// Converts an obvhs-style binary tree (root at 0, siblings at `first_index` and
-/// `first_index + 1`, leaves indexing `primitive_indices`) into our layout, copying
-/// triangles in depth-first leaf order.
-fn flatten(source: &[Bvh2Node], primitive_indices: &[u32], mesh: &TriangleMesh) -> Bvh {
-    let mut bvh = Bvh {
+/// `first_index + 1`, leaves indexing `primitive_indices`) into our layout, with
+/// triangles in depth-first leaf order, and collapses leaves as it goes, as
+/// obvhs' `collapse` does: two sibling leaves become one when they hold at most
+/// [`MAX_LEAF_TRIANGLES`] and the SAH says one leaf costs no more than their
+/// parent and two leaves. One walk of the tree (obvhs' own collapse walks it
+/// several times and took over half as long as the PLOC build itself), its
+/// subtrees at depth [`PARALLEL_FLATTEN_DEPTH`] walked in parallel and then
+/// spliced, in order, into the walk of the levels above: the same tree as one
+/// walk on one thread gives.
+fn flatten(source: &[Bvh2Node], primitive_indices: &[u32]) -> BinaryTree {
+    let mut frontier = Vec::new();
+    let mut work = vec![(0u32, 1usize)];
+    while let Some((index, depth)) = work.pop() {
+        let node = &source[index as usize];
+        if node.is_leaf() {
+            continue;
+        }
+        if depth == PARALLEL_FLATTEN_DEPTH {
+            frontier.push(index);
+        } else {
+            work.extend([
+                (node.first_index + 1, depth + 1),
+                (node.first_index, depth + 1),
+            ]);
+        }
+    }
+    let mut parts = frontier
+        .par_iter()
+        .map(|&root| {
+            let mut part = BinaryTree::default();
+            let flattened = walk(
+                source,
+                primitive_indices,
+                (root, PARALLEL_FLATTEN_DEPTH),
+                &mut part,
+                &mut |_, _, _| None,
+            );
+            (part, flattened)
+        })
+        .collect::<Vec<_>>()
+        .into_iter();
+    let mut tree = BinaryTree {
         nodes: Vec::with_capacity(source.len() / 2 + 1),
-        triangles: Vec::with_capacity(primitive_indices.len()),
         triangle_ids: Vec::with_capacity(primitive_indices.len()),
         stack_depth: 1,
-        scale: 1.0,
-        wide: wide::WideBvh::default(),
     };
-    let append_leaf = |bvh: &mut Bvh, node: &Bvh2Node, first: u32, count: u32| {
-        let index = bvh.triangles.len() as u32;
-        let range = first as usize..(first + count) as usize;
-        for &id in &primitive_indices[range] {
-            let [v0, v1, v2] = mesh.triangle_vertices(id as usize).map(|v| v.to_array());
-            bvh.triangles.push(BvhTriangle { v0, v1, v2 });
-            bvh.triangle_ids.push(id);
-        }
-        BvhChild {
-            min: node.aabb().min.to_array(),
-            index,
-            max: node.aabb().max.to_array(),
-            count,
-        }
-    };
-
-    let root = &source[0];
-    if root.is_leaf() {
-        // A single-leaf tree still needs an inner node; split the leaf's range in
-        // two (a one-triangle leaf appears twice, which is harmless).
-        let first_half = root.prim_count.div_ceil(2);
-        let left = append_leaf(&mut bvh, root, root.first_index, first_half);
-        let right = if root.prim_count > first_half {
-            append_leaf(
-                &mut bvh,
-                root,
-                root.first_index + first_half,
-                root.prim_count - first_half,
-            )
-        } else {
-            left
-        };
-        bvh.nodes.push(BvhNode {
-            children: [left, right],
-        });
-        bvh.wide = wide::WideBvh::build(&bvh.nodes, &bvh.triangles);
-        return bvh;
-    }
-
-    bvh.nodes.push(BvhNode::default());
-    // (source node, our node, depth of our node); right pushed first so the left
-    // subtree is laid out first.
-    let mut work = vec![(0usize, 0usize, 1usize)];
-    while let Some((source_index, our_index, depth)) = work.pop() {
-        bvh.stack_depth = bvh.stack_depth.max(depth);
-        let first_child = source[source_index].first_index as usize;
-        let mut children = [BvhChild::default(); 2];
-        let mut inner_children = [None; 2];
-        for (side, child) in children.iter_mut().enumerate() {
-            let child_node = &source[first_child + side];
-            if child_node.is_leaf() {
-                *child = append_leaf(
-                    &mut bvh,
-                    child_node,
-                    child_node.first_index,
-                    child_node.prim_count,
-                );
-            } else {
-                let index = bvh.nodes.len();
-                bvh.nodes.push(BvhNode::default());
-                *child = BvhChild {
-                    min: child_node.aabb().min.to_array(),
-                    index: index as u32,
-                    max: child_node.aabb().max.to_array(),
-                    count: 0,
-                };
-                inner_children[side] = Some((first_child + side, index, depth + 1));
+    // The walk meets the subtrees at that depth in the order they were found.
+    let root = walk(
+        source,
+        primitive_indices,
+        (0, 1),
+        &mut tree,
+        &mut |_, depth, tree| {
+            (depth == PARALLEL_FLATTEN_DEPTH).then(|| {
+                let (part, flattened) = parts.next().expect("a walked subtree");
+                splice(tree, part, flattened)
+            })
+        },
+    );
+    match root {
+        Flattened::Inner(_) => {
+            // Post-order put the root last; reversed, every parent comes before
+            // its children and the root is node 0.
+            let last = tree.nodes.len() as u32 - 1;
+            tree.nodes.reverse();
+            for node in &mut tree.nodes {
+                for child in node.children.iter_mut().filter(|child| child.count == 0) {
+                    child.index = last - child.index;
+                }
             }
         }
-        bvh.nodes[our_index] = BvhNode { children };
-        work.extend(inner_children.into_iter().rev().flatten());
+        Flattened::Leaf { count, .. } => {
+            // A single-leaf tree still needs an inner node; split the leaf in two
+            // (a one-triangle leaf appears twice, which is harmless).
+            let root = source[0].aabb();
+            let first_half = count.div_ceil(2);
+            let half = |index: u32, count: u32| BvhChild {
+                min: root.min.to_array(),
+                index,
+                max: root.max.to_array(),
+                count,
+            };
+            let left = half(0, first_half);
+            let right = if count > first_half {
+                half(first_half, count - first_half)
+            } else {
+                left
+            };
+            tree.nodes.push(BvhNode {
+                children: [left, right],
+            });
+        }
     }
-    // `depth_limit::limit_depth` keeps every tree within the stacks.
-    debug_assert!(bvh.stack_depth <= MAX_STACK_DEPTH, "{}", bvh.stack_depth);
-    bvh.wide = wide::WideBvh::build(&bvh.nodes, &bvh.triangles);
-    bvh
+    tree
+}
+
+/// The depth (the root's is 1) of the subtrees [`flatten`] walks in parallel:
+/// up to 16 of them, enough to keep every core busy.
+const PARALLEL_FLATTEN_DEPTH: usize = 5;
+
+/// Walks the subtree at `(root, its depth)` in post-order, left first, appending
+/// its triangles and its inner nodes (numbered in post-order) to `tree`, and
+/// returns what it became. `splice(node, depth, tree)` may stand in for an inner
+/// node's whole subtree.
+fn walk(
+    source: &[Bvh2Node],
+    primitive_indices: &[u32],
+    (root, root_depth): (u32, usize),
+    tree: &mut BinaryTree,
+    splice: &mut impl FnMut(u32, usize, &mut BinaryTree) -> Option<Flattened>,
+) -> Flattened {
+    // (source node, its depth, children done)
+    let mut work = vec![(root, root_depth, false)];
+    let mut done: Vec<Flattened> = Vec::new();
+    while let Some((index, depth, children_done)) = work.pop() {
+        let node = &source[index as usize];
+        if node.is_leaf() {
+            let first = tree.triangle_ids.len() as u32;
+            let range = node.first_index as usize..(node.first_index + node.prim_count) as usize;
+            tree.triangle_ids
+                .extend_from_slice(&primitive_indices[range]);
+            done.push(Flattened::Leaf {
+                first,
+                count: node.prim_count,
+            });
+            continue;
+        }
+        let first_child = node.first_index;
+        if !children_done {
+            if let Some(flattened) = splice(index, depth, tree) {
+                done.push(flattened);
+                continue;
+            }
+            work.extend([
+                (index, depth, true),
+                (first_child + 1, depth + 1, false),
+                (first_child, depth + 1, false),
+            ]);
+            continue;
+        }
+        let right = done.pop().expect("the right child is flattened");
+        let left = done.pop().expect("the left child is flattened");
+        let sources = [
+            &source[first_child as usize],
+            &source[first_child as usize + 1],
+        ];
+        if let (
+            Flattened::Leaf {
+                first,
+                count: left_count,
+            },
+            Flattened::Leaf {
+                count: right_count, ..
+            },
+        ) = (left, right)
+        {
+            let count = left_count + right_count;
+            let as_one_leaf = node.aabb().half_area() * (count as f32 - COLLAPSE_TRAVERSAL_COST);
+            let as_two_leaves = sources[0].aabb().half_area() * left_count as f32
+                + sources[1].aabb().half_area() * right_count as f32;
+            // The two leaves' triangles are consecutive in leaf order.
+            if count <= MAX_LEAF_TRIANGLES && as_one_leaf <= as_two_leaves {
+                done.push(Flattened::Leaf { first, count });
+                continue;
+            }
+        }
+        let child = |flattened: Flattened, child_node: &Bvh2Node| {
+            let (index, count) = match flattened {
+                Flattened::Leaf { first, count } => (first, count),
+                Flattened::Inner(index) => (index, 0),
+            };
+            BvhChild {
+                min: child_node.aabb().min.to_array(),
+                index,
+                max: child_node.aabb().max.to_array(),
+                count,
+            }
+        };
+        done.push(Flattened::Inner(tree.nodes.len() as u32));
+        tree.nodes.push(BvhNode {
+            children: [child(left, sources[0]), child(right, sources[1])],
+        });
+        tree.stack_depth = tree.stack_depth.max(depth);
+    }
+    done.pop().expect("the root is flattened")
+}
+
+/// Appends a subtree walked on its own to `tree`, where one walk would have put
+/// it: its node and triangle numbers shifted by what `tree` already holds.
+fn splice(tree: &mut BinaryTree, part: BinaryTree, flattened: Flattened) -> Flattened {
+    let node_offset = tree.nodes.len() as u32;
+    let triangle_offset = tree.triangle_ids.len() as u32;
+    tree.nodes.extend(part.nodes.into_iter().map(|mut node| {
+        for child in &mut node.children {
+            child.index += if child.count == 0 {
+                node_offset
+            } else {
+                triangle_offset
+            };
+        }
+        node
+    }));
+    tree.triangle_ids.extend_from_slice(&part.triangle_ids);
+    tree.stack_depth = tree.stack_depth.max(part.stack_depth);
+    match flattened {
+        Flattened::Leaf { first, count } => Flattened::Leaf {
+            first: first + triangle_offset,
+            count,
+        },
+        Flattened::Inner(index) => Flattened::Inner(index + node_offset),
+    }
 }
 
 mod gpu;

@@ -196,7 +196,7 @@ fn median_split_bvh(mesh: &TriangleMesh) -> Bvh {
     let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
     let mut nodes = vec![Bvh2Node::default()];
     depth_limit::median_split(&mut nodes, 0, &boxes, &mut order, 0);
-    flatten(&nodes, &order, mesh)
+    Bvh::from_binary(flatten(&nodes, &order), mesh)
 }
 
 #[test]

@@ -20,6 +20,8 @@ use super::simd::{Lanes, Lanes8, LanesExt, Portable};
 use super::{Bvh, BvhChild, BvhNode, BvhTriangle, PreparedRay, Ray, ROBUST_FAR_SCALE};
 use packet::{is_packet, packet_key, single_rays_below, trace_packet, PacketStack, MAX_PACKET};
 
+use rayon::prelude::*;
+
 mod packet;
 
 /// Children per node.
@@ -91,7 +93,8 @@ impl Stack {
 impl WideBvh {
     /// Collapses the binary tree: a wide node takes its binary node's two children
     /// and repeatedly opens the inner child with the largest surface area until it
-    /// has eight children or only leaves.
+    /// has eight children or only leaves. The nodes are laid out on one thread, the
+    /// triangle groups (most of the bytes) filled in parallel afterwards.
     pub(super) fn build(nodes: &[BvhNode], triangles: &[BvhTriangle]) -> WideBvh {
         let ranges = subtree_ranges(nodes);
         // A child's triangles if it becomes a leaf here: binary leaves, and inner
@@ -103,11 +106,16 @@ impl WideBvh {
                 ranges[child.index as usize].filter(|&(_, count)| count as usize <= MERGE_LIMIT)
             }
         };
-        let mut wide = WideBvh::default();
-        wide.nodes.push(WideNode::empty());
+        // Every wide node takes at least one binary node; every leaf holds at
+        // most one group that is not full.
+        let mut wide_nodes = Vec::with_capacity(nodes.len());
+        let mut groups = Vec::with_capacity(nodes.len() + 1 + triangles.len() / GROUP);
+        wide_nodes.push(WideNode::empty());
         let mut work = vec![(0usize, 0usize)];
+        let mut children: Vec<BvhChild> = Vec::with_capacity(WIDTH);
         while let Some((binary, index)) = work.pop() {
-            let mut children: Vec<BvhChild> = nodes[binary].children.to_vec();
+            children.clear();
+            children.extend_from_slice(&nodes[binary].children);
             while children.len() < WIDTH {
                 // The inner child with the largest surface area opens first.
                 let widest = children
@@ -128,54 +136,29 @@ impl WideBvh {
                 }
                 node.valid |= 1 << lane;
                 node.children[lane] = if let Some((first, count)) = as_leaf(child) {
-                    wide.push_leaf(triangles, first, count)
+                    place_leaf(&mut groups, first, count)
                 } else {
-                    let below = wide.nodes.len();
-                    wide.nodes.push(WideNode::empty());
+                    let below = wide_nodes.len();
+                    wide_nodes.push(WideNode::empty());
                     work.push((child.index as usize, below));
                     below as u32
                 };
             }
-            wide.nodes[index] = node;
+            wide_nodes[index] = node;
         }
+        let wide = WideBvh {
+            nodes: wide_nodes,
+            groups: groups
+                .par_iter()
+                .map(|place| place.fill(triangles))
+                .collect(),
+        };
         assert!(
             wide.stack_bound() <= STACK_ENTRIES,
             "wide BVH needs {} stack entries",
             wide.stack_bound()
         );
         wide
-    }
-
-    /// Appends a leaf's triangles as groups; returns its child reference.
-    fn push_leaf(&mut self, triangles: &[BvhTriangle], first: u32, count: u32) -> u32 {
-        let reference = LEAF | self.groups.len() as u32;
-        assert!(
-            self.groups.len() < LEAF as usize,
-            "too many triangle groups"
-        );
-        let leaf = &triangles[first as usize..(first + count) as usize];
-        let chunks = leaf.len().div_ceil(GROUP);
-        for (chunk_index, chunk) in leaf.chunks(GROUP).enumerate() {
-            let mut group = TriangleGroup {
-                v: [[[0.0; GROUP]; 3]; 3],
-                first: first + (chunk_index * GROUP) as u32,
-                valid: (1 << chunk.len()) - 1,
-                last: chunk_index + 1 == chunks,
-            };
-            for lane in 0..GROUP {
-                let triangle = chunk.get(lane).unwrap_or(&chunk[0]);
-                for (vertex, position) in [triangle.v0, triangle.v1, triangle.v2]
-                    .into_iter()
-                    .enumerate()
-                {
-                    for (row, coordinate) in group.v[vertex].iter_mut().zip(position) {
-                        row[lane] = coordinate;
-                    }
-                }
-            }
-            self.groups.push(group);
-        }
-        reference
     }
 
     /// The most entries a traversal pushes: along any path, a node with `n`
@@ -193,6 +176,53 @@ impl WideBvh {
         }
         below[0] + 1
     }
+}
+
+/// Where a [`TriangleGroup`] comes from: `lanes` leaf-order triangles from `first`.
+struct GroupPlace {
+    first: u32,
+    lanes: u32,
+    last: bool,
+}
+
+impl GroupPlace {
+    fn fill(&self, triangles: &[BvhTriangle]) -> TriangleGroup {
+        let chunk = &triangles[self.first as usize..(self.first + self.lanes) as usize];
+        let mut group = TriangleGroup {
+            v: [[[0.0; GROUP]; 3]; 3],
+            first: self.first,
+            valid: (1 << self.lanes) - 1,
+            last: self.last,
+        };
+        for lane in 0..GROUP {
+            let triangle = chunk.get(lane).unwrap_or(&chunk[0]);
+            for (vertex, position) in [triangle.v0, triangle.v1, triangle.v2]
+                .into_iter()
+                .enumerate()
+            {
+                for (row, coordinate) in group.v[vertex].iter_mut().zip(position) {
+                    row[lane] = coordinate;
+                }
+            }
+        }
+        group
+    }
+}
+
+/// Places a leaf's triangles in groups of up to [`GROUP`]; returns its child reference.
+fn place_leaf(groups: &mut Vec<GroupPlace>, first: u32, count: u32) -> u32 {
+    let reference = LEAF | groups.len() as u32;
+    assert!(groups.len() < LEAF as usize, "too many triangle groups");
+    let chunks = (count as usize).div_ceil(GROUP);
+    for chunk_index in 0..chunks {
+        let start = chunk_index * GROUP;
+        groups.push(GroupPlace {
+            first: first + start as u32,
+            lanes: (count as usize - start).min(GROUP) as u32,
+            last: chunk_index + 1 == chunks,
+        });
+    }
+    reference
 }
 
 impl WideNode {
