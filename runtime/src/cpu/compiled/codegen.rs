@@ -55,14 +55,18 @@ extern "C" fn dpp_cos(x: f32) -> f32 {
     x.cos()
 }
 
+/// A block's floats, as the block calls read and write them.
+type Lanes = [f32; BLOCK as usize];
+const LANES_BYTES: u32 = std::mem::size_of::<Lanes>() as u32;
+
 /// The same for a block: arguments and result in [`BLOCK`]-float arrays
 /// (the kernel's stack), so that the vector loop makes one call per block,
 /// not one per lane, and saves its live vectors around it once.
 macro_rules! block_calls {
     ($($block:ident = $scalar:ident($($arg:ident),+);)+) => {$(
         /// # Safety
-        /// Every pointer addresses a `[f32; 4]` (the kernel's stack slot).
-        unsafe extern "C" fn $block($($arg: *const [f32; 4],)+ out: *mut [f32; 4]) {
+        /// Every pointer addresses a [`Lanes`] (the kernel's stack slot).
+        unsafe extern "C" fn $block($($arg: *const Lanes,)+ out: *mut Lanes) {
             // SAFETY: the caller's contract above.
             let ($($arg,)+) = unsafe { ($(*$arg,)+) };
             let result = std::array::from_fn(|e| $scalar($($arg[e]),+));
@@ -80,7 +84,7 @@ block_calls! {
 }
 
 /// The calls by functor name: the element's function and the block's.
-type UnaryBlock = unsafe extern "C" fn(*const [f32; 4], *mut [f32; 4]);
+type UnaryBlock = unsafe extern "C" fn(*const Lanes, *mut Lanes);
 const UNARY_CALLS: [(&str, extern "C" fn(f32) -> f32, UnaryBlock); 4] = [
     ("exp", dpp_exp, dpp_exp_block),
     ("log", dpp_log, dpp_log_block),
@@ -315,7 +319,7 @@ struct Emitter<'b, 'f> {
     fail: Block,
     values: HashMap<u32, Val>,
     /// The places of each index variable's gathers in this iteration.
-    gathered_places: HashMap<u32, Places>,
+    places_by_index: HashMap<u32, Places>,
     /// Whether every check of the iteration so far holds (see [`Self::require`]).
     valid: Option<Value>,
     /// Room for a block call's arguments and result (three vectors).
@@ -344,8 +348,11 @@ impl Emitter<'_, '_> {
         let (inputs, lengths, outputs, params, n, first) =
             (*inputs, *lengths, *outputs, *params, *n, *first);
         let zero = b.ins().iconst(types::I64, 0);
-        let call_slot =
-            b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, 3 * 16, 4));
+        let call_slot = b.create_sized_stack_slot(StackSlotData::new(
+            StackSlotKind::ExplicitSlot,
+            3 * LANES_BYTES,
+            4,
+        ));
         let mut emitter = Emitter {
             call_slot,
             b,
@@ -355,7 +362,7 @@ impl Emitter<'_, '_> {
             position: zero,
             fail,
             values: HashMap::new(),
-            gathered_places: HashMap::new(),
+            places_by_index: HashMap::new(),
             valid: None,
         };
         let invariants = emitter.invariants(segment, inputs, lengths, outputs, params, first);
@@ -539,7 +546,7 @@ impl Emitter<'_, '_> {
     /// `self.position`, and the stores of its outputs.
     fn body(&mut self, segment: &Segment, invariants: &Invariants) -> Result<(), String> {
         self.values.clear();
-        self.gathered_places.clear();
+        self.places_by_index.clear();
         for (k, (var, ty)) in segment.elementwise.iter().enumerate() {
             let places = Places::From(self.position);
             let val = self.at(*ty, &invariants.elementwise[k], places);
@@ -561,13 +568,13 @@ impl Emitter<'_, '_> {
                 SegmentStep::Gather {
                     index, gathered: g, ..
                 } => {
-                    let places = match self.gathered_places.get(index) {
+                    let places = match self.places_by_index.get(index) {
                         Some(places) => places.clone(),
                         None => {
                             let limit = invariants.limits.get(index).ok_or("a gather's limit")?;
                             let index_value = self.prim(*index)?[0];
                             let places = self.gathered_places(index_value, limit);
-                            self.gathered_places.insert(*index, places.clone());
+                            self.places_by_index.insert(*index, places.clone());
                             places
                         }
                     };
@@ -953,14 +960,15 @@ impl Emitter<'_, '_> {
         let flags = MemFlagsData::trusted();
         let mut pointers = Vec::new();
         for (k, arg) in args.iter().enumerate() {
-            let pointer = self
-                .b
-                .ins()
-                .stack_addr(types::I64, self.call_slot, (16 * k) as i32);
+            let pointer = self.b.ins().stack_addr(
+                types::I64,
+                self.call_slot,
+                (LANES_BYTES as usize * k) as i32,
+            );
             self.b.ins().store(flags, *arg, pointer, 0);
             pointers.push(pointer);
         }
-        let result_offset = (16 * args.len()) as i32;
+        let result_offset = (LANES_BYTES as usize * args.len()) as i32;
         let result = self
             .b
             .ins()
