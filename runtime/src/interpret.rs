@@ -12,6 +12,7 @@ use crate::error::ErrorKind;
 use crate::functor::FunctorError;
 use crate::host::{HostValue, Uniforms};
 use crate::types::{ElemType, RecordRegistry};
+use std::collections::{HashMap, HashSet};
 use std::ops::Range;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -238,6 +239,49 @@ pub struct StageCall<'a> {
     pub len: usize,
     pub uniforms: &'a Uniforms,
     pub records: &'a RecordRegistry,
+    /// Arrays nothing reads after this stage (see [`last_reads`]): a
+    /// backend may reuse them, as a scatter `into:` one of them does.
+    pub last_reads: &'a [VarId],
+}
+
+/// For each stage (in [`Plan::stages`] order), the variables whose last
+/// read it is: read by nodes of the plan's top level only (never inside a
+/// loop or branch, which may run again), the last of them this stage.
+pub fn last_reads(plan: &Plan) -> Vec<Vec<VarId>> {
+    let stages = plan.stages();
+    let mut nested = HashSet::new();
+    let mut last_reader: HashMap<VarId, Option<usize>> = HashMap::new();
+    for node in &plan.body {
+        if let Node::For { body, .. } | Node::While { body, .. } = node {
+            walk_nodes(body, &mut |inner| nested.extend(node_reads(inner)));
+        }
+        if let Node::If {
+            then_body,
+            else_body,
+            ..
+        } = node
+        {
+            for body in [then_body, else_body] {
+                walk_nodes(body, &mut |inner| nested.extend(node_reads(inner)));
+            }
+        }
+        let stage = match node {
+            Node::Stage(stage) => stages.iter().position(|s| std::ptr::eq(*s, stage)),
+            _ => None,
+        };
+        for var in node_reads(node) {
+            if matches!(plan.var(var).ty, VarType::Array(_)) {
+                last_reader.insert(var, stage);
+            }
+        }
+    }
+    let mut by_stage = vec![Vec::new(); stages.len()];
+    for (var, stage) in last_reader {
+        if let (Some(stage), false) = (stage, nested.contains(&var)) {
+            by_stage[stage].push(var);
+        }
+    }
+    by_stage
 }
 
 impl StageCall<'_> {
@@ -397,6 +441,7 @@ pub fn interpret_observed<B: Backend>(
             })
             .collect(),
         stages,
+        last_reads: last_reads(plan),
         observer: hooks.observer,
         compositor: hooks.compositor,
         composited_elsewhere: false,
@@ -449,6 +494,8 @@ struct Interpreter<'a, B: Backend> {
     outputs: Vec<(String, OutputValue)>,
     profile: Vec<StageTiming>,
     stages: Vec<&'a Stage>,
+    /// By stage: [`last_reads`].
+    last_reads: Vec<Vec<VarId>>,
     observer: Option<StageObserver<'a>>,
     compositor: Option<&'a dyn Compositor>,
     /// Set once `composite` sent this rank's part to rank 0.
@@ -823,6 +870,11 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                 )));
             }
         }
+        let number = self
+            .stages
+            .iter()
+            .position(|s| std::ptr::eq(*s, stage))
+            .unwrap_or_default();
         let call = StageCall {
             plan: self.plan,
             stage,
@@ -830,6 +882,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
             len,
             uniforms: self.uniforms,
             records: self.records,
+            last_reads: &self.last_reads[number],
         };
         let measured = self.backend.run_stage(&call, &mut self.slots)?;
         Ok((len, measured))

@@ -146,8 +146,8 @@ fn the_documented_shading_edits_run_and_only_darken() {
     let edits = [
         (
             "workload2_expressions.dpp",
-            "term     = select(diffuse > 0.0, falling * l.color * (sbase * diffuse + sm.specular * specular), vec3(0.0))",
-            "term     = select(diffuse > 0.0, falling * l.color * sbase * diffuse, vec3(0.0))",
+            "term     = select(inFront, falling * l.color * (sbase * diffuse + sm.specular * specular), vec3(0.0))",
+            "term     = select(inFront, falling * l.color * sbase * diffuse, vec3(0.0))",
         ),
         (
             "workload3_expressions.dpp",

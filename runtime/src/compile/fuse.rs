@@ -353,11 +353,20 @@ impl StageFormer<'_> {
             {
                 self.canonical(*a)
             }
-            HostExpr::Binary(op, a, b) => HostExpr::Binary(
-                op,
-                Box::new(self.canonical(*a)),
-                Box::new(self.canonical(*b)),
-            ),
+            HostExpr::Binary(op, a, b) => {
+                let (a, b) = (self.canonical(*a), self.canonical(*b));
+                match (op, &a) {
+                    // `n * k / k` is `n`: a group gather's sums of a fan-out's
+                    // `len(points) * k` pairs run over the points.
+                    (BinaryOp::Div, HostExpr::Binary(BinaryOp::Mul, n, k)) if **k == b => {
+                        (**n).clone()
+                    }
+                    (BinaryOp::Div, HostExpr::Binary(BinaryOp::Mul, k, n)) if **k == b => {
+                        (**n).clone()
+                    }
+                    _ => HostExpr::Binary(op, Box::new(a), Box::new(b)),
+                }
+            }
             HostExpr::Call(f, args) => {
                 HostExpr::Call(f, args.into_iter().map(|a| self.canonical(a)).collect())
             }

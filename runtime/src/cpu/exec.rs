@@ -356,8 +356,10 @@ impl StageRun<'_, '_> {
             ),
             ScatterTarget::Into(dst) => {
                 let array = self.array(*dst)?.clone();
-                if *dst == op.outputs[0] && !self.read_in_stage(*dst, Some(op)) {
-                    // The slot is about to be overwritten: it lets go of the array.
+                let last_read = *dst == op.outputs[0] || self.call.last_reads.contains(dst);
+                if last_read && !self.read_in_stage(*dst, Some(op)) {
+                    // The slot is about to be overwritten, or never read
+                    // again: it lets go of the array.
                     self.slots.take_array(*dst);
                 }
                 Arc::unwrap_or_clone(array)

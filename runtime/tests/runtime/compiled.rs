@@ -297,6 +297,27 @@ fn gathers_and_iota_inside_a_compiled_run() {
     ));
 }
 
+/// The pair idiom (every point with each item: `k / n`, `k % n`), which
+/// the kernels run point block by item: with one item, fewer items than a
+/// block and more, so that chunks begin and end inside a point's pairs; and
+/// a `pow` that only a `select` reads, computed only where it is taken.
+#[test]
+fn the_pair_idiom_every_point_with_each_item() {
+    for items in [1, 3, 7] {
+        check(&over_edges(&format!(
+            "
+    points = gather(iota(37), a)
+    k = iota(len(a) * {items})
+    p = gather(k / {items}, a)
+    q = gather(k % {items}, points)
+    out terms = select(p < q, pow(q, p), 0.0) + toF32(k)
+    out others = select(p < q, 1.0, exp(p))
+    out parts = vec3(p, q, 1.0) * gather(k / {items}, b) + toF32(k % {items})
+    out sums = gather<sum>(p * q, group: {items})"
+        )));
+    }
+}
+
 /// A failing element stops the compiled loop; the ops then run one by one
 /// and report it exactly as the column run does.
 #[test]
@@ -309,6 +330,9 @@ fn a_failing_element_fails_as_it_does_column_at_a_time() {
         "short = gather(iota(300), b)\n    out g = gather(i, a) * gather(i, short)",
         // From an empty array.
         "none = gather(iota(0), b)\n    out g = gather(i, a) * gather(i, none)",
+        // The pair idiom past its points, and with no items.
+        "short = gather(iota(300), b)\n    k = iota(600 * 2)\n    out g = gather(k / 2, short) * gather(k % 2, a)",
+        "k = iota(600 * 2)\n    out g = gather(k / 0, a) * gather(k % 0, b)",
     ] {
         let source = over_edges(&format!("    {failing}"));
         let compiled = run(&source, Elementwise::Compiled).map(|_| ());

@@ -9,6 +9,7 @@ mod composite;
 mod diagnostics;
 mod generic_functors;
 mod kernels;
+mod last_reads;
 mod pass_cse;
 mod pass_desugar;
 mod pass_fuse;

@@ -425,7 +425,8 @@ fn rule4_a_sort_ends_the_stage_of_its_keys_and_values() {
 #[test]
 fn rule4_fan_out_and_group_gather_change_the_length() {
     // A stage ends before each length change; the op that changes it heads
-    // the next stage, where maps over the new length join it.
+    // the next stage, where maps over the new length join it. The sums of
+    // `n * k` elements in groups of `k` run over `n`: `h` reads `x` there.
     check!(
         r#"
         param n = 4
@@ -434,7 +435,7 @@ fn rule4_fan_out_and_group_gather_change_the_length() {
             x = iota(n) → map<toF32>
             e = scatter<repeat>(x, fanout: k) → map<add>(fill(n * k, 0.5))
             g = gather<sum>(e, group: k)
-            out h = map<mul>(g, g)
+            out h = map<mul>(g, x)
         }
         "#,
         @"
@@ -461,16 +462,16 @@ fn rule4_fan_out_and_group_gather_change_the_length() {
       ends at length change
     }
     stage 3 [gather<sum> → map<mul>] {
-      over (n * k) / k
+      over n
       g = gather<sum>(e, group: k)
-      h = map<mul>(g, g)
-      reads direct: -; indexed: e: f32; uniform: k
+      h = map<mul>(g, x)
+      reads direct: x: f32; indexed: e: f32; uniform: k
       materialises h: f32
       ends at control flow
     }
     out h = h
     ---
-    h = [2.25, 20.25, 56.25, 110.25]
+    h = [0.0, 4.5, 15.0, 31.5]
     "
     );
 }

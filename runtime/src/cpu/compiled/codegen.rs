@@ -2,7 +2,9 @@
 //! computes every op of the segment per element, in registers, and stores
 //! only the values read after it. The loop takes [`BLOCK`] elements at a
 //! time, one per lane of 128-bit vectors (Cranelift's widest on x86), then
-//! the chunk's last few elements one at a time.
+//! the chunk's last few elements one at a time. A segment with the pair
+//! idiom ([`FanOut`]) takes the chunk's whole points in blocks of [`BLOCK`]
+//! with one item at a time, and the loop above does the chunk's ends.
 //!
 //! Every operation computes exactly what the generic functor's CPU kernel
 //! computes (same IEEE operations in the same order, lane by lane; the same
@@ -27,7 +29,7 @@ use cranelift_codegen::settings::{self, Configurable};
 use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, FuncId, Linkage, Module};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
 
 /// `(inputs, gathered lengths, outputs, params, n, first index) -> status`:
 /// the leaf pointers of the element-wise inputs (already at the chunk's
@@ -58,18 +60,25 @@ extern "C" fn dpp_cos(x: f32) -> f32 {
 /// A block's floats, as the block calls read and write them.
 type Lanes = [f32; BLOCK as usize];
 const LANES_BYTES: u32 = std::mem::size_of::<Lanes>() as u32;
+/// Which lanes of a block call are wanted (nonzero): a block's bool mask.
+type Wanted = [i32; BLOCK as usize];
 
-/// The same for a block: arguments and result in [`BLOCK`]-float arrays
-/// (the kernel's stack), so that the vector loop makes one call per block,
-/// not one per lane, and saves its live vectors around it once.
+/// The same for a block: arguments, the wanted lanes and the result in
+/// [`BLOCK`]-element arrays (the kernel's stack), so that the vector loop
+/// makes one call per block, not one per lane, and saves its live vectors
+/// around it once. A lane not wanted (a `select` discards it) is not
+/// computed: 0.
 macro_rules! block_calls {
     ($($block:ident = $scalar:ident($($arg:ident),+);)+) => {$(
         /// # Safety
-        /// Every pointer addresses a [`Lanes`] (the kernel's stack slot).
-        unsafe extern "C" fn $block($($arg: *const Lanes,)+ out: *mut Lanes) {
+        /// Every pointer addresses a [`Lanes`] or [`Wanted`] (the kernel's stack slot).
+        unsafe extern "C" fn $block($($arg: *const Lanes,)+ wanted: *const Wanted, out: *mut Lanes) {
             // SAFETY: the caller's contract above.
-            let ($($arg,)+) = unsafe { ($(*$arg,)+) };
-            let result = std::array::from_fn(|e| $scalar($($arg[e]),+));
+            let ($($arg,)+ wanted) = unsafe { ($(*$arg,)+ *wanted) };
+            let result = std::array::from_fn(|e| match wanted[e] {
+                0 => 0.0,
+                _ => $scalar($($arg[e]),+),
+            });
             // SAFETY: the caller's contract above.
             unsafe { *out = result };
         }
@@ -84,7 +93,7 @@ block_calls! {
 }
 
 /// The calls by functor name: the element's function and the block's.
-type UnaryBlock = unsafe extern "C" fn(*const Lanes, *mut Lanes);
+type UnaryBlock = unsafe extern "C" fn(*const Lanes, *const Wanted, *mut Lanes);
 const UNARY_CALLS: [(&str, extern "C" fn(f32) -> f32, UnaryBlock); 4] = [
     ("exp", dpp_exp, dpp_exp_block),
     ("log", dpp_log, dpp_log_block),
@@ -179,6 +188,71 @@ enum Val {
     },
 }
 
+/// The libm calls (`pow`, `exp`, ...) of `segment` whose values only
+/// `select`s read, all with the same condition, computed before the call,
+/// and the same side: each with that condition and whether the select takes
+/// it where the condition holds. Their block calls compute only those lanes
+/// (in `select(dot(n, v) > 0.0, pow(...), 0.0)`, only where the surface
+/// faces the viewer).
+fn selected_calls(segment: &Segment) -> HashMap<u32, (u32, bool)> {
+    let defined_before = |var: u32, position: usize| {
+        segment.elementwise.iter().any(|(v, _)| v.0 == var)
+            || segment.steps[..position]
+                .iter()
+                .any(|step| step.output().0 == var)
+    };
+    let mut selected = HashMap::new();
+    for (position, step) in segment.steps.iter().enumerate() {
+        let SegmentStep::Map {
+            functor, output, ..
+        } = step
+        else {
+            continue;
+        };
+        let call = functor == "pow" || UNARY_CALLS.iter().any(|(name, _, _)| name == functor);
+        if !call || segment.outputs.iter().any(|(v, _)| *v == *output) {
+            continue;
+        }
+        let mut side = None;
+        let all_selected = segment.steps.iter().all(|reader| {
+            let reads: Vec<u32> = match reader {
+                SegmentStep::Map { inputs, .. } => inputs.iter().map(|(v, _)| *v).collect(),
+                SegmentStep::Gather { index, .. } => vec![*index],
+                SegmentStep::Field { record, .. } => vec![*record],
+                SegmentStep::Iota { .. } | SegmentStep::Fill { .. } => Vec::new(),
+            };
+            if !reads.contains(&output.0) {
+                return true;
+            }
+            let SegmentStep::Map {
+                functor, inputs, ..
+            } = reader
+            else {
+                return false;
+            };
+            let this_side = match inputs[..] {
+                [(condition, _), (a, _), (b, _)]
+                    if functor == "select" && condition != output.0 =>
+                {
+                    match (a == output.0, b == output.0) {
+                        (true, false) => (condition, true),
+                        (false, true) => (condition, false),
+                        _ => return false,
+                    }
+                }
+                _ => return false,
+            };
+            *side.get_or_insert(this_side) == this_side
+        });
+        if let Some((condition, when)) = side.filter(|_| all_selected) {
+            if defined_before(condition, position) {
+                selected.insert(output.0, (condition, when));
+            }
+        }
+    }
+    selected
+}
+
 /// Where an iteration's elements are in a column.
 #[derive(Clone)]
 enum Places {
@@ -186,6 +260,8 @@ enum Places {
     From(Value),
     /// One position (an `i64`) per element: a gather's.
     Each(Vec<Value>),
+    /// The same position (an `i64`) for every element: loaded once.
+    Same(Value),
 }
 
 /// Compiles `segment` into machine code. The module is never freed: a kernel
@@ -260,6 +336,8 @@ fn declare_libm(module: &mut JITModule) -> Result<Libm, String> {
             block.params.push(AbiParam::new(pointer));
         }
         element.returns.push(AbiParam::new(types::F32));
+        // The wanted lanes and the result.
+        block.params.push(AbiParam::new(pointer));
         block.params.push(AbiParam::new(pointer));
         let element = module.declare_function(&format!("dpp_{name}"), Linkage::Import, &element);
         let block = module.declare_function(&format!("dpp_{name}_block"), Linkage::Import, &block);
@@ -322,8 +400,141 @@ struct Emitter<'b, 'f> {
     places_by_index: HashMap<u32, Places>,
     /// Whether every check of the iteration so far holds (see [`Self::require`]).
     valid: Option<Value>,
-    /// Room for a block call's arguments and result (three vectors).
+    /// Room for a block call's arguments, wanted lanes and result (four vectors).
     call_slot: StackSlot,
+    /// The libm calls that only a `select` reads (see [`selected_calls`]).
+    selected_calls: HashMap<u32, (u32, bool)>,
+    /// The lanes the block calls being emitted must compute (a mask), if not all.
+    wanted: Option<Value>,
+    /// The segment's fan-out, if it has one (see [`FanOut`]).
+    fan_out: Option<FanOut>,
+    /// In a fan-out iteration: its lanes' values of the idiom.
+    fan_lanes: Option<FanLanes>,
+}
+
+/// The pair idiom `k = iota(len(points) * n)`, `k / n`, `k % n` (`n` a u32
+/// fill): each point meets each of `n` items. Its loop can take the pairs
+/// of [`BLOCK`] consecutive points with one item at a time instead of
+/// [`BLOCK`] consecutive pairs, so that a gather by `k / n` reads
+/// consecutive elements (no index to check or take apart per lane) and one
+/// by `k % n` reads one element for the whole block. Each pair is computed
+/// by the same operations as before, only in another order, so the results
+/// are the same bits.
+struct FanOut {
+    /// The fill `n`, by its index among the segment's fills.
+    fill: usize,
+    quotients: Vec<u32>,
+    remainders: Vec<u32>,
+    /// Whether each step depends on the point alone (not on the item, `k`
+    /// or an element-wise input): computed once per block of points, before
+    /// the loop over the items.
+    point_steps: Vec<bool>,
+}
+
+impl FanOut {
+    /// The idiom in `segment`: an iota divided by a u32 fill, and perhaps
+    /// taken modulo the same fill.
+    fn find(segment: &Segment) -> Option<FanOut> {
+        let iota = segment.steps.iter().find_map(|step| match step {
+            SegmentStep::Iota { output } => Some(output.0),
+            _ => None,
+        })?;
+        let fill_of = |var: u32| {
+            segment.steps.iter().find_map(|step| match step {
+                SegmentStep::Fill { fill, output }
+                    if output.0 == var && segment.fills[*fill] == ElemType::U32 =>
+                {
+                    Some(*fill)
+                }
+                _ => None,
+            })
+        };
+        let mut fan = None::<FanOut>;
+        for step in &segment.steps {
+            let SegmentStep::Map {
+                functor,
+                inputs,
+                output,
+                ..
+            } = step
+            else {
+                continue;
+            };
+            let [(numerator, ElemType::U32), (divisor, ElemType::U32)] = inputs[..] else {
+                continue;
+            };
+            let Some(fill) = fill_of(divisor).filter(|_| numerator == iota) else {
+                continue;
+            };
+            if fan.as_ref().is_some_and(|f| f.fill != fill) {
+                continue;
+            }
+            let fan = fan.get_or_insert(FanOut {
+                fill,
+                quotients: Vec::new(),
+                remainders: Vec::new(),
+                point_steps: Vec::new(),
+            });
+            match functor.as_str() {
+                "div" => fan.quotients.push(output.0),
+                "rem" => fan.remainders.push(output.0),
+                _ => {}
+            }
+        }
+        let mut fan = fan.filter(|f| !f.quotients.is_empty())?;
+        let mut per_item: HashSet<u32> = segment.elementwise.iter().map(|(v, _)| v.0).collect();
+        per_item.extend(&fan.remainders);
+        fan.point_steps = segment
+            .steps
+            .iter()
+            .map(|step| {
+                let output = step.output().0;
+                let item = match step {
+                    SegmentStep::Iota { .. } => true,
+                    SegmentStep::Fill { .. } => false,
+                    SegmentStep::Field { record, .. } => per_item.contains(record),
+                    SegmentStep::Gather { index, .. } => per_item.contains(index),
+                    SegmentStep::Map { .. } if fan.quotients.contains(&output) => false,
+                    SegmentStep::Map { inputs, .. } => {
+                        inputs.iter().any(|(v, _)| per_item.contains(v))
+                    }
+                };
+                if item {
+                    per_item.insert(output);
+                }
+                !item
+            })
+            .collect();
+        Some(fan)
+    }
+}
+
+/// A fan-out iteration's idiom values and places: the points
+/// `point .. point + BLOCK`, and once the loop over the items has begun,
+/// their pairs with one item.
+struct FanLanes {
+    /// `k / n` per lane (i32x4).
+    quotient: Value,
+    item: Option<ItemLanes>,
+}
+
+struct ItemLanes {
+    /// `k` and `k % n` per lane (i32x4).
+    iota: Value,
+    remainder: Value,
+    /// Each lane's position in the chunk (i64).
+    positions: Vec<Value>,
+}
+
+/// Where a chunk's fan-out loop runs: the chunk's positions before it, the
+/// points it takes (a multiple of [`BLOCK`], from `first_point`) and the
+/// position where the rest begins; all zero where it cannot run.
+struct FanPlan {
+    head_end: Value,
+    first_point: Value,
+    points_end: Value,
+    rest_start: Value,
+    items: Value,
 }
 
 impl Emitter<'_, '_> {
@@ -338,6 +549,7 @@ impl Emitter<'_, '_> {
         let block_body = b.create_block();
         let element_head = b.create_block();
         let element_body = b.create_block();
+        let after = b.create_block();
         let exit = b.create_block();
         let fail = b.create_block();
         b.append_block_params_for_function_params(entry);
@@ -350,7 +562,7 @@ impl Emitter<'_, '_> {
         let zero = b.ins().iconst(types::I64, 0);
         let call_slot = b.create_sized_stack_slot(StackSlotData::new(
             StackSlotKind::ExplicitSlot,
-            3 * LANES_BYTES,
+            4 * LANES_BYTES,
             4,
         ));
         let mut emitter = Emitter {
@@ -364,6 +576,10 @@ impl Emitter<'_, '_> {
             values: HashMap::new(),
             places_by_index: HashMap::new(),
             valid: None,
+            fan_out: FanOut::find(segment),
+            fan_lanes: None,
+            selected_calls: selected_calls(segment),
+            wanted: None,
         };
         let invariants = emitter.invariants(segment, inputs, lengths, outputs, params, first);
         let b = &mut emitter.b;
@@ -386,31 +602,61 @@ impl Emitter<'_, '_> {
             b.ins().brif(elements, fail, &[zero.into()], exit, &[]);
             b.switch_to_block(go_on);
         }
-        let blocks_end = b.ins().band_imm_s(n, -i64::from(BLOCK));
-        b.ins().jump(block_head, &[zero.into()]);
+        let plan = emitter.fan_plan(&invariants, n, first);
+        for head in [block_head, element_head] {
+            // The position, the range's end, and 0 before a fan-out loop or 1 after it.
+            for _ in 0..3 {
+                emitter.b.append_block_param(head, types::I64);
+            }
+        }
+        let b = &mut emitter.b;
+        let (head_end, before) = match &plan {
+            Some(plan) => (plan.head_end, zero),
+            None => (n, b.ins().iconst(types::I64, 1)),
+        };
+        b.ins()
+            .jump(block_head, &[zero.into(), head_end.into(), before.into()]);
 
-        // Whole blocks, then the rest element by element.
-        for (width, head, body, end, next_head) in [
-            (BLOCK, block_head, block_body, blocks_end, element_head),
-            (1, element_head, element_body, n, exit),
+        // A range of positions: whole blocks, then the rest element by element.
+        for (width, head, body, next_head) in [
+            (BLOCK, block_head, block_body, element_head),
+            (1, element_head, element_body, after),
         ] {
             let b = &mut emitter.b;
-            b.append_block_param(head, types::I64);
             b.switch_to_block(head);
-            let position = b.block_params(head)[0];
-            let more = b.ins().icmp(IntCC::UnsignedLessThan, position, end);
-            let rest: &[_] = if width == BLOCK {
-                &[position.into()]
-            } else {
-                &[]
+            let [position, end, phase] = b.block_params(head)[..] else {
+                return Err("a loop head's parameters".into());
             };
-            b.ins().brif(more, body, &[], next_head, rest);
+            let last = b.ins().iadd_imm_s(position, i64::from(width));
+            let more = b.ins().icmp(IntCC::UnsignedLessThanOrEqual, last, end);
+            let args: &[_] = match width == BLOCK {
+                true => &[position.into(), end.into(), phase.into()],
+                false => &[phase.into()],
+            };
+            b.ins().brif(more, body, &[], next_head, args);
             b.switch_to_block(body);
             emitter.width = width;
             emitter.position = position;
             emitter.body(segment, &invariants)?;
-            let next = emitter.b.ins().iadd_imm_s(position, i64::from(width));
-            emitter.b.ins().jump(head, &[next.into()]);
+            emitter
+                .b
+                .ins()
+                .jump(head, &[last.into(), end.into(), phase.into()]);
+        }
+        let b = &mut emitter.b;
+        b.append_block_param(after, types::I64);
+        b.switch_to_block(after);
+        let phase = b.block_params(after)[0];
+        match &plan {
+            Some(plan) => {
+                let fan_head = b.create_block();
+                b.ins()
+                    .brif(phase, exit, &[], fan_head, &[plan.first_point.into()]);
+                emitter.fan_loop(segment, &invariants, plan, fan_head, block_head, n, first)?;
+            }
+            None => {
+                b.ins().jump(exit, &[]);
+            }
         }
 
         let b = emitter.b;
@@ -547,12 +793,35 @@ impl Emitter<'_, '_> {
     fn body(&mut self, segment: &Segment, invariants: &Invariants) -> Result<(), String> {
         self.values.clear();
         self.places_by_index.clear();
+        self.load_elementwise(segment, invariants);
+        self.steps(segment, invariants, |_| true)?;
+        self.finish(segment, invariants)
+    }
+
+    /// The element-wise inputs at the iteration's places.
+    fn load_elementwise(&mut self, segment: &Segment, invariants: &Invariants) {
+        let places = self.chunk_places();
         for (k, (var, ty)) in segment.elementwise.iter().enumerate() {
-            let places = Places::From(self.position);
-            let val = self.at(*ty, &invariants.elementwise[k], places);
+            let val = self.at(*ty, &invariants.elementwise[k], places.clone());
             self.values.insert(var.0, val);
         }
-        for step in &segment.steps {
+    }
+
+    /// The steps at the positions `chosen` takes, in order.
+    fn steps(
+        &mut self,
+        segment: &Segment,
+        invariants: &Invariants,
+        chosen: impl Fn(usize) -> bool,
+    ) -> Result<(), String> {
+        for (position, step) in segment.steps.iter().enumerate() {
+            if !chosen(position) {
+                continue;
+            }
+            if let Some(val) = self.fan_value(step) {
+                self.values.insert(step.output().0, val);
+                continue;
+            }
             let val = match step {
                 SegmentStep::Iota { .. } => {
                     let index = self.iota(invariants.first);
@@ -586,26 +855,261 @@ impl Emitter<'_, '_> {
                     inputs,
                     output_type,
                     named,
-                    ..
-                } => self.map(functor, inputs, *output_type, named)?,
+                    output,
+                } => {
+                    // A fan-out's point steps come before an item's condition: all lanes then.
+                    let condition = self
+                        .selected_calls
+                        .get(&output.0)
+                        .filter(|_| self.width > 1)
+                        .and_then(|&(condition, when)| Some((self.prim(condition).ok()?, when)));
+                    self.wanted = match condition {
+                        Some((mask, true)) => Some(mask[0]),
+                        Some((mask, false)) => Some(self.b.ins().bnot(mask[0])),
+                        None => None,
+                    };
+                    let val = self.map(functor, inputs, *output_type, named);
+                    self.wanted = None;
+                    val?
+                }
             };
             self.values.insert(step.output().0, val);
         }
+        Ok(())
+    }
+
+    /// Fails the iteration where a check of its steps so far did not hold.
+    fn check(&mut self) {
         if let Some(valid) = self.valid.take() {
             let next = self.b.create_block();
             let position = self.position.into();
             self.b.ins().brif(valid, next, &[], self.fail, &[position]);
             self.b.switch_to_block(next);
         }
+    }
+
+    /// The end of an iteration: its checks, then the stores of its outputs.
+    fn finish(&mut self, segment: &Segment, invariants: &Invariants) -> Result<(), String> {
+        self.check();
+        let places = self.chunk_places();
         for ((var, ty), pointers) in segment.outputs.iter().zip(&invariants.outputs) {
             let val = self
                 .values
                 .get(&var.0)
                 .cloned()
                 .ok_or("an unknown output")?;
-            self.store(*ty, val, pointers)?;
+            self.store(*ty, val, pointers, &places)?;
         }
         Ok(())
+    }
+
+    /// The places of the iteration's elements in the chunk's columns.
+    fn chunk_places(&self) -> Places {
+        match self
+            .fan_lanes
+            .as_ref()
+            .and_then(|lanes| lanes.item.as_ref())
+        {
+            Some(item) => Places::Each(item.positions.clone()),
+            None => Places::From(self.position),
+        }
+    }
+
+    /// In a fan-out iteration, the value of `step` if it is the idiom's.
+    fn fan_value(&self, step: &SegmentStep) -> Option<Val> {
+        let (fan, lanes) = (self.fan_out.as_ref()?, self.fan_lanes.as_ref()?);
+        let output = step.output().0;
+        let value = match (step, &lanes.item) {
+            (SegmentStep::Iota { .. }, Some(item)) => item.iota,
+            (SegmentStep::Map { .. }, _) if fan.quotients.contains(&output) => lanes.quotient,
+            (SegmentStep::Map { .. }, Some(item)) if fan.remainders.contains(&output) => {
+                item.remainder
+            }
+            _ => return None,
+        };
+        Some(Val::Prim {
+            components: vec![value],
+        })
+    }
+
+    /// Where the chunk's fan-out loop runs (`None` for a segment without
+    /// the idiom). It runs only where every point and item it takes is
+    /// inside the arrays gathered by `k / n` and `k % n` and `k` fits a
+    /// u32, so that its gathers need no check.
+    fn fan_plan(&mut self, invariants: &Invariants, n: Value, first: Value) -> Option<FanPlan> {
+        let fan = self.fan_out.as_ref()?;
+        let Val::Prim { components } = &invariants.fills[fan.fill].0 else {
+            return None;
+        };
+        let b = &mut self.b;
+        let items = b.ins().uextend(types::I64, components[0]);
+        let zero = b.ins().iconst(types::I64, 0);
+        let one = b.ins().iconst(types::I64, 1);
+        let no_items = b.ins().icmp_imm_u(IntCC::Equal, items, 0);
+        let divisor = b.ins().select(no_items, one, items);
+        let end = b.ins().iadd(first, n);
+        let rounded_up = b.ins().iadd(first, divisor);
+        let rounded_up = b.ins().iadd_imm_s(rounded_up, -1);
+        let first_point = b.ins().udiv(rounded_up, divisor);
+        let last_point = b.ins().udiv(end, divisor);
+        let some = b
+            .ins()
+            .icmp(IntCC::UnsignedGreaterThan, last_point, first_point);
+        let span = b.ins().isub(last_point, first_point);
+        let span = b.ins().select(some, span, zero);
+        let points = b.ins().band_imm_s(span, -i64::from(BLOCK));
+        let points_end = b.ins().iadd(first_point, points);
+        let mut ok = b.ins().icmp_imm_u(IntCC::NotEqual, points, 0);
+        let fits = b
+            .ins()
+            .icmp_imm_u(IntCC::UnsignedLessThanOrEqual, end, 1 << 32);
+        ok = b.ins().band(ok, fits);
+        let bounds = fan
+            .quotients
+            .iter()
+            .map(|q| (q, points_end))
+            .chain(fan.remainders.iter().map(|r| (r, items)));
+        for (var, needed) in bounds {
+            if let Some(limit) = invariants.limits.get(var) {
+                let inside = b
+                    .ins()
+                    .icmp(IntCC::UnsignedLessThanOrEqual, needed, limit.len);
+                ok = b.ins().band(ok, inside);
+            }
+        }
+        let head_end = b.ins().imul(first_point, items);
+        let head_end = b.ins().isub(head_end, first);
+        let rest_start = b.ins().imul(points_end, items);
+        let rest_start = b.ins().isub(rest_start, first);
+        Some(FanPlan {
+            head_end: b.ins().select(ok, head_end, zero),
+            first_point,
+            points_end: b.ins().select(ok, points_end, first_point),
+            rest_start: b.ins().select(ok, rest_start, zero),
+            items,
+        })
+    }
+
+    /// The fan-out loop: for each [`BLOCK`] of points from `plan.first_point`,
+    /// the steps of the points alone, then each item's; then the rest of the
+    /// chunk's range at `block_head`.
+    #[allow(clippy::too_many_arguments)]
+    fn fan_loop(
+        &mut self,
+        segment: &Segment,
+        invariants: &Invariants,
+        plan: &FanPlan,
+        fan_head: Block,
+        block_head: Block,
+        n: Value,
+        first: Value,
+    ) -> Result<(), String> {
+        let point_steps = match &self.fan_out {
+            Some(fan) => fan.point_steps.clone(),
+            None => return Err("a fan-out loop without the idiom".into()),
+        };
+        let b = &mut self.b;
+        let (points_body, item_head, item_body) =
+            (b.create_block(), b.create_block(), b.create_block());
+        b.append_block_param(fan_head, types::I64);
+        b.switch_to_block(fan_head);
+        let point = b.block_params(fan_head)[0];
+        let more = b
+            .ins()
+            .icmp(IntCC::UnsignedLessThan, point, plan.points_end);
+        let after_fan = b.ins().iconst(types::I64, 1);
+        b.ins().brif(
+            more,
+            points_body,
+            &[],
+            block_head,
+            &[plan.rest_start.into(), n.into(), after_fan.into()],
+        );
+
+        // The points' own steps, once for all their items.
+        self.b.switch_to_block(points_body);
+        self.width = BLOCK;
+        let point_u32 = self.b.ins().ireduce(types::I32, point);
+        let points = self.widen(point_u32);
+        let lanes = self.lane_numbers();
+        let quotient = self.b.ins().iadd(points, lanes);
+        let pairs_start = self.b.ins().imul(point, plan.items);
+        self.position = self.b.ins().isub(pairs_start, first);
+        self.fan_lanes = Some(FanLanes {
+            quotient,
+            item: None,
+        });
+        self.values.clear();
+        self.places_by_index.clear();
+        if let Some(fan) = &self.fan_out {
+            // Inside the arrays (checked once for the whole loop: `fan_plan`).
+            for quotient in &fan.quotients {
+                self.places_by_index.insert(*quotient, Places::From(point));
+            }
+        }
+        self.steps(segment, invariants, |k| point_steps[k])?;
+        self.check();
+        let zero = self.b.ins().iconst(types::I64, 0);
+        self.b.ins().jump(item_head, &[zero.into()]);
+
+        // Each item's pairs with the points.
+        let b = &mut self.b;
+        b.append_block_param(item_head, types::I64);
+        b.switch_to_block(item_head);
+        let item = b.block_params(item_head)[0];
+        let more = b.ins().icmp(IntCC::UnsignedLessThan, item, plan.items);
+        let next_point = b.ins().iadd_imm_s(point, i64::from(BLOCK));
+        b.ins()
+            .brif(more, item_body, &[], fan_head, &[next_point.into()]);
+        self.b.switch_to_block(item_body);
+        let item_lanes = self.item_lanes(plan, quotient, pairs_start, item, first);
+        self.position = item_lanes.positions[0];
+        if let Some(fan) = &self.fan_out {
+            for remainder in &fan.remainders {
+                self.places_by_index.insert(*remainder, Places::Same(item));
+            }
+        }
+        if let Some(lanes) = &mut self.fan_lanes {
+            lanes.item = Some(item_lanes);
+        }
+        self.load_elementwise(segment, invariants);
+        self.steps(segment, invariants, |k| !point_steps[k])?;
+        self.finish(segment, invariants)?;
+        self.fan_lanes = None;
+        let next_item = self.b.ins().iadd_imm_s(item, 1);
+        self.b.ins().jump(item_head, &[next_item.into()]);
+        Ok(())
+    }
+
+    /// The idiom's values for the pairs of the points whose `k / n` is
+    /// `quotient` with `item`, and their positions in the chunk (the first
+    /// point's pairs begin at `pairs_start`).
+    fn item_lanes(
+        &mut self,
+        plan: &FanPlan,
+        quotient: Value,
+        pairs_start: Value,
+        item: Value,
+        first: Value,
+    ) -> ItemLanes {
+        let item_u32 = self.b.ins().ireduce(types::I32, item);
+        let items_u32 = self.b.ins().ireduce(types::I32, plan.items);
+        let remainder = self.widen(item_u32);
+        let items_wide = self.widen(items_u32);
+        let scaled = self.b.ins().imul(quotient, items_wide);
+        let iota = self.b.ins().iadd(scaled, remainder);
+        let start = self.b.ins().iadd(pairs_start, item);
+        let mut position = self.b.ins().isub(start, first);
+        let mut positions = vec![position];
+        for _ in 1..BLOCK {
+            position = self.b.ins().iadd(position, plan.items);
+            positions.push(position);
+        }
+        ItemLanes {
+            iota,
+            remainder,
+            positions,
+        }
     }
 
     /// The iteration's elements' indices in the whole array (u32, wrapping).
@@ -616,15 +1120,20 @@ impl Emitter<'_, '_> {
             return start;
         }
         let starts = self.widen(start);
-        let offsets: Vec<u8> = (0..BLOCK).flat_map(u32::to_le_bytes).collect();
-        let offsets = self
+        let offsets = self.lane_numbers();
+        self.b.ins().iadd(starts, offsets)
+    }
+
+    /// Each lane's number, 0 to [`BLOCK`] - 1 (i32x4).
+    fn lane_numbers(&mut self) -> Value {
+        let numbers: Vec<u8> = (0..BLOCK).flat_map(u32::to_le_bytes).collect();
+        let numbers = self
             .b
             .func
             .dfg
             .constants
-            .insert(ConstantData::from(offsets));
-        let offsets = self.b.ins().vconst(types::I32X4, offsets);
-        self.b.ins().iadd(starts, offsets)
+            .insert(ConstantData::from(numbers));
+        self.b.ins().vconst(types::I32X4, numbers)
     }
 
     /// The positions of a gather's `index` (u32 per element). One out of
@@ -695,6 +1204,7 @@ impl Emitter<'_, '_> {
                 })
                 .collect(),
             Places::Each(positions) => positions.clone(),
+            Places::Same(position) => vec![*position; self.width as usize],
         }
     }
 
@@ -716,6 +1226,24 @@ impl Emitter<'_, '_> {
             let address = self.address(ty, base, first);
             let vector = self.value_type(ty);
             return vec![self.b.ins().load(vector, input_flags(true), address, 0)];
+        }
+        if let (Places::Same(position), true) = (places, self.width > 1) {
+            // One element for the whole block.
+            let width = self.width;
+            self.width = 1;
+            let one = self.load(ty, base, &Places::Each(vec![*position]));
+            self.width = width;
+            return one
+                .into_iter()
+                .map(|scalar| match ty {
+                    ElemType::Bool => {
+                        let wide = self.b.ins().uextend(types::I32, scalar);
+                        let mask = self.b.ins().ineg(wide);
+                        self.widen(mask)
+                    }
+                    _ => self.widen(scalar),
+                })
+                .collect();
         }
         let addresses: Vec<Value> = self
             .positions(places)
@@ -742,11 +1270,16 @@ impl Emitter<'_, '_> {
             .collect()
     }
 
-    fn store(&mut self, ty: ElemType, val: Val, pointers: &[Value]) -> Result<(), String> {
-        let places = Places::From(self.position);
+    fn store(
+        &mut self,
+        ty: ElemType,
+        val: Val,
+        pointers: &[Value],
+        places: &Places,
+    ) -> Result<(), String> {
         match val {
             Val::Prim { components } => {
-                if let Some(first) = self.moves_whole(ty, &places) {
+                if let Some(first) = self.moves_whole(ty, places) {
                     let address = self.address(ty, pointers[0], first);
                     self.b
                         .ins()
@@ -754,7 +1287,7 @@ impl Emitter<'_, '_> {
                     return Ok(());
                 }
                 let addresses: Vec<Value> = self
-                    .positions(&places)
+                    .positions(places)
                     .into_iter()
                     .map(|position| self.address(ty, pointers[0], position))
                     .collect();
@@ -777,10 +1310,13 @@ impl Emitter<'_, '_> {
                     }
                 }
             }
-            Val::Record { fields, places } => {
+            Val::Record {
+                fields,
+                places: loaded_from,
+            } => {
                 for ((field_ty, base), pointer) in fields.into_iter().zip(pointers) {
-                    let components = self.load(field_ty, base, &places);
-                    self.store(field_ty, Val::Prim { components }, &[*pointer])?;
+                    let components = self.load(field_ty, base, &loaded_from);
+                    self.store(field_ty, Val::Prim { components }, &[*pointer], places)?;
                 }
             }
         }
@@ -968,11 +1504,21 @@ impl Emitter<'_, '_> {
             self.b.ins().store(flags, *arg, pointer, 0);
             pointers.push(pointer);
         }
-        let result_offset = (LANES_BYTES as usize * args.len()) as i32;
+        let wanted = match self.wanted {
+            Some(mask) => mask,
+            None => self.i32(-1),
+        };
+        let slot = |k: usize| (LANES_BYTES as usize * k) as i32;
+        let wanted_at = self
+            .b
+            .ins()
+            .stack_addr(types::I64, self.call_slot, slot(args.len()));
+        self.b.ins().store(flags, wanted, wanted_at, 0);
+        pointers.push(wanted_at);
         let result = self
             .b
             .ins()
-            .stack_addr(types::I64, self.call_slot, result_offset);
+            .stack_addr(types::I64, self.call_slot, slot(args.len() + 1));
         pointers.push(result);
         self.b.ins().call(block, &pointers);
         self.b.ins().load(types::F32X4, flags, result, 0)

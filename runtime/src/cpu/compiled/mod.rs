@@ -125,7 +125,8 @@ pub(crate) fn prepare(call: &StageCall<'_>) -> Vec<Option<PreparedSegment>> {
     prepared
 }
 
-/// The maximal runs of compilable ops with at least two that compute.
+/// The maximal runs of compilable ops with at least two that compute or
+/// fill (a fill alone is a column written and read; in a loop, a register).
 fn candidate_runs(call: &StageCall<'_>) -> Vec<Range<usize>> {
     let ops = &call.stage.ops;
     let mut runs = Vec::new();
@@ -136,7 +137,7 @@ fn candidate_runs(call: &StageCall<'_>) -> Vec<Range<usize>> {
         }
         let computing = ops[start..end]
             .iter()
-            .filter(|op| matches!(op.kind, OpKind::Map | OpKind::Gather))
+            .filter(|op| matches!(op.kind, OpKind::Map | OpKind::Gather | OpKind::Fill { .. }))
             .count();
         if computing >= 2 {
             runs.push(start..end);

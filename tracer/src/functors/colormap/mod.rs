@@ -36,11 +36,12 @@ fn run_cpu(
     let colormap = shading.colormap();
     let [low, high] = shading.scalar_range();
     let inverse_range = 1.0 / (high - low);
-    *outputs[0].as_vec3_mut() = inputs[0]
-        .as_f32()
-        .iter()
-        .map(|&s| colormap.linear_at((s - low) * inverse_range))
-        .collect();
+    outputs[0].as_vec3_mut().extend(
+        inputs[0]
+            .as_f32()
+            .iter()
+            .map(|&s| colormap.linear_at((s - low) * inverse_range)),
+    );
     Ok(())
 }
 
