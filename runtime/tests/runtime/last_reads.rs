@@ -26,8 +26,13 @@ fn only_an_array_read_last_by_a_top_level_stage_is_listed() {
         "#,
     );
     let library = library();
-    let plan = compile(&pipelines_path("last_reads_test.dpp"), &source, &library, true)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let plan = compile(
+        &pipelines_path("last_reads_test.dpp"),
+        &source,
+        &library,
+        true,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     let names: Vec<String> = last_reads(&plan)
         .iter()
         .flatten()
