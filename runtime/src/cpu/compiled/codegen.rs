@@ -760,17 +760,7 @@ impl Emitter<'_, '_> {
                     })
                     .collect();
                 self.width = BLOCK;
-                let block = one
-                    .iter()
-                    .map(|&scalar| match ty {
-                        ElemType::Bool => {
-                            let wide = self.b.ins().uextend(types::I32, scalar);
-                            let mask = self.b.ins().ineg(wide);
-                            self.widen(mask)
-                        }
-                        _ => self.widen(scalar),
-                    })
-                    .collect();
+                let block = self.broadcast(*ty, &one);
                 self.width = 1;
                 (
                     Val::Prim { components: one },
@@ -1233,17 +1223,7 @@ impl Emitter<'_, '_> {
             self.width = 1;
             let one = self.load(ty, base, &Places::Each(vec![*position]));
             self.width = width;
-            return one
-                .into_iter()
-                .map(|scalar| match ty {
-                    ElemType::Bool => {
-                        let wide = self.b.ins().uextend(types::I32, scalar);
-                        let mask = self.b.ins().ineg(wide);
-                        self.widen(mask)
-                    }
-                    _ => self.widen(scalar),
-                })
-                .collect();
+            return self.broadcast(ty, &one);
         }
         let addresses: Vec<Value> = self
             .positions(places)
@@ -1379,6 +1359,21 @@ impl Emitter<'_, '_> {
             (ElemType::Bool, _) => types::I32X4,
             _ => scalar_type(ty).by(self.width).unwrap_or(types::INVALID),
         }
+    }
+
+    /// One element's components (a bool as an `i8`) for every element of
+    /// the iteration (a bool as a mask).
+    fn broadcast(&mut self, ty: ElemType, one: &[Value]) -> Vec<Value> {
+        one.iter()
+            .map(|&scalar| match ty {
+                ElemType::Bool if self.width > 1 => {
+                    let wide = self.b.ins().uextend(types::I32, scalar);
+                    let mask = self.b.ins().ineg(wide);
+                    self.widen(mask)
+                }
+                _ => self.widen(scalar),
+            })
+            .collect()
     }
 
     /// `scalar` for every element of the iteration.
