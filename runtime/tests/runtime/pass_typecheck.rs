@@ -418,10 +418,10 @@ fn symbolic_lengths_of_fan_out_group_gather_and_compaction() {
     t: f32, len = n * 2
     ---
     [iota → map<toF32>] over n * k
-    [gather<sum>] over (n * k) / k
-    [scatter<repeat> → fill → map<lt> → map<toU32> → exclusiveScan<add>] over ((n * k) / k) * k
-    [reduce<add>] over ((n * k) / k) * k
-    [iota → scatter] over ((n * k) / k) * k
+    [gather<sum>] over n
+    [scatter<repeat> → fill → map<lt> → map<toU32> → exclusiveScan<add>] over n * k
+    [reduce<add>] over n * k
+    [iota → scatter] over n * k
     [iota → scatter] over n
     [gather] over count
     [fill] over n * 2
