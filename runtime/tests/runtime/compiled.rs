@@ -307,13 +307,16 @@ fn the_pair_idiom_every_point_with_each_item() {
         check(&over_edges(&format!(
             "
     points = gather(iota(37), a)
+    // Values made before the compiled run: read at the pairs' places.
+    e = scatter<repeat>(b, fanout: {items})
     k = iota(len(a) * {items})
     p = gather(k / {items}, a)
     q = gather(k % {items}, points)
     out terms = select(p < q, pow(q, p), 0.0) + toF32(k)
     out others = select(p < q, 1.0, exp(p))
     out parts = vec3(p, q, 1.0) * gather(k / {items}, b) + toF32(k % {items})
-    out sums = gather<sum>(p * q, group: {items})"
+    out sums = gather<sum>(p * q, group: {items})
+    out mixed = e * p + select(e < q, sqrt(p), q)"
         )));
     }
 }
