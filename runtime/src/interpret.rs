@@ -252,19 +252,12 @@ pub fn last_reads(plan: &Plan) -> Vec<Vec<VarId>> {
     let mut nested = HashSet::new();
     let mut last_reader: HashMap<VarId, Option<usize>> = HashMap::new();
     for node in &plan.body {
-        if let Node::For { body, .. } | Node::While { body, .. } = node {
-            walk_nodes(body, &mut |inner| nested.extend(node_reads(inner)));
-        }
-        if let Node::If {
-            then_body,
-            else_body,
-            ..
-        } = node
-        {
-            for body in [then_body, else_body] {
-                walk_nodes(body, &mut |inner| nested.extend(node_reads(inner)));
+        // Whatever the node nests (a loop's or branch's body, a blend).
+        walk_nodes(std::slice::from_ref(node), &mut |inner| {
+            if !std::ptr::eq(inner, node) {
+                nested.extend(node_reads(inner));
             }
-        }
+        });
         let stage = match node {
             Node::Stage(stage) => stages.iter().position(|s| std::ptr::eq(*s, stage)),
             _ => None,
@@ -573,7 +566,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                         });
                     }
                     let start = Instant::now();
-                    let (elements, measured) = self.stage(stage).map_err(|e| {
+                    let (elements, measured) = self.stage(stage, number).map_err(|e| {
                         e.within(format_args!(
                             "stage {} [{}]",
                             number + 1,
@@ -797,7 +790,12 @@ impl<'a, B: Backend> Interpreter<'a, B> {
 
     /// Runs one stage; returns the number of elements it ran over and the
     /// backend's own measure of its time, if any.
-    fn stage(&mut self, stage: &'a Stage) -> Result<(usize, StageMeasurement), RunError> {
+    /// Runs `stage`, the plan's stage `number` (from 0).
+    fn stage(
+        &mut self,
+        stage: &'a Stage,
+        number: usize,
+    ) -> Result<(usize, StageMeasurement), RunError> {
         let head = &stage.ops[0];
         let mut host_values = Vec::with_capacity(stage.ops.len());
         for op in &stage.ops {
@@ -870,11 +868,6 @@ impl<'a, B: Backend> Interpreter<'a, B> {
                 )));
             }
         }
-        let number = self
-            .stages
-            .iter()
-            .position(|s| std::ptr::eq(*s, stage))
-            .unwrap_or_default();
         let call = StageCall {
             plan: self.plan,
             stage,

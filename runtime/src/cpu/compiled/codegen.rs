@@ -526,9 +526,10 @@ struct ItemLanes {
     positions: Vec<Value>,
 }
 
-/// Where a chunk's fan-out loop runs: the chunk's positions before it, the
-/// points it takes (a multiple of [`BLOCK`], from `first_point`) and the
-/// position where the rest begins; all zero where it cannot run.
+/// Where a chunk's fan-out loop runs: the chunk's positions before it
+/// (`..head_end`), the points it takes (`first_point..points_end`, a
+/// multiple of [`BLOCK`]) and the position where the rest begins. Where it
+/// cannot run it takes no points and the rest is the whole chunk.
 struct FanPlan {
     head_end: Value,
     first_point: Value,
