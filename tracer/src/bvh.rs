@@ -1,5 +1,7 @@
-//! The bounding volume hierarchy: built by obvhs (PLOC), flattened into our own
-//! two-wide layout, traversed by our own code (the same layout feeds the GPU).
+//! The bounding volume hierarchy: built by our binned SAH build
+//! (`bvh/binned_sah.rs`, the default) or by obvhs' PLOC (flattened here), in
+//! our own two-wide layout, traversed by our own code (the same layout feeds
+//! the GPU).
 //!
 //! Layout: every [`BvhNode`] is an inner node holding the boxes of both children
 //! (64 bytes, Aila–Laine style), so one node visit tests two boxes and descends
@@ -26,6 +28,7 @@ use obvhs::bvh2::Bvh2;
 use obvhs::ploc::{PlocBuilder, SortPrecision};
 use rayon::prelude::*;
 
+mod binned_sah;
 mod depth_limit;
 mod simd;
 mod wide;
@@ -85,6 +88,17 @@ pub struct HitRecord {
     pub v: f32,
 }
 
+/// How [`Bvh::build_with`] builds the binary tree (the eight-wide one is
+/// collapsed from it either way).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BvhBuilder {
+    /// obvhs' PLOC, its reinsertion, and our collapse of its leaves.
+    Ploc,
+    /// Our top-down binned SAH build (`bvh/binned_sah.rs`).
+    #[default]
+    BinnedSah,
+}
+
 #[derive(Clone, Debug)]
 pub struct Bvh {
     nodes: Vec<BvhNode>,
@@ -135,43 +149,36 @@ impl Bvh {
     /// where the tree is deeper than [`MAX_STACK_DEPTH`], the subtrees that reach
     /// past it are rebuilt by median split (`bvh/depth_limit.rs`).
     pub fn build(mesh: &TriangleMesh) -> Result<Bvh, MeshError> {
+        Bvh::build_with(mesh, BvhBuilder::default())
+    }
+
+    /// [`Bvh::build`] by a chosen builder.
+    pub fn build_with(mesh: &TriangleMesh, builder: BvhBuilder) -> Result<Bvh, MeshError> {
         mesh.validate()?;
         let scale = bvh_space_scale(mesh);
         let mut bvh = if scale == 1.0 {
-            Bvh::build_unscaled(mesh)
+            Bvh::build_unscaled(mesh, builder)
         } else {
-            Bvh::build_unscaled(&TriangleMesh {
-                positions: mesh.positions.iter().map(|&p| p * scale).collect(),
-                triangles: mesh.triangles.clone(),
-                normals: None,
-                scalars: None,
-            })
+            Bvh::build_unscaled(
+                &TriangleMesh {
+                    positions: mesh.positions.iter().map(|&p| p * scale).collect(),
+                    triangles: mesh.triangles.clone(),
+                    normals: None,
+                    scalars: None,
+                },
+                builder,
+            )
         };
         bvh.scale = scale;
         Ok(bvh)
     }
 
     /// [`Bvh::build`] of a mesh whose coordinates need no scaling.
-    fn build_unscaled(mesh: &TriangleMesh) -> Bvh {
-        let tree = ploc_tree(mesh);
-        let mut binary = flatten(&tree.nodes, &tree.primitive_indices);
-        // Checked on the flattened tree: too deep a tree is rare (PLOC's chains
-        // of tiny triangles), and finding out costs a walk of its own.
-        if binary.stack_depth > MAX_STACK_DEPTH {
-            if let Some((nodes, primitive_indices)) = depth_limit::limit_depth(
-                &tree.nodes,
-                &tree.primitive_indices,
-                mesh,
-                MAX_STACK_DEPTH,
-            ) {
-                binary = flatten(&nodes, &primitive_indices);
-            }
-        }
-        debug_assert!(
-            binary.stack_depth <= MAX_STACK_DEPTH,
-            "{}",
-            binary.stack_depth
-        );
+    fn build_unscaled(mesh: &TriangleMesh, builder: BvhBuilder) -> Bvh {
+        let binary = match builder {
+            BvhBuilder::BinnedSah => binned_sah::binned_sah_tree(mesh),
+            BvhBuilder::Ploc => ploc_binary_tree(mesh),
+        };
         Bvh::from_binary(binary, mesh)
     }
 
@@ -589,6 +596,27 @@ fn ploc_tree(mesh: &TriangleMesh) -> Bvh2 {
     tree
 }
 
+/// [`ploc_tree`] flattened, with subtrees too deep for the stacks rebuilt.
+fn ploc_binary_tree(mesh: &TriangleMesh) -> BinaryTree {
+    let tree = ploc_tree(mesh);
+    let mut binary = flatten(&tree.nodes, &tree.primitive_indices);
+    // Checked on the flattened tree: too deep a tree is rare (PLOC's chains
+    // of tiny triangles), and finding out costs a walk of its own.
+    if binary.stack_depth > MAX_STACK_DEPTH {
+        if let Some((nodes, primitive_indices)) =
+            depth_limit::limit_depth(&tree.nodes, &tree.primitive_indices, mesh, MAX_STACK_DEPTH)
+        {
+            binary = flatten(&nodes, &primitive_indices);
+        }
+    }
+    debug_assert!(
+        binary.stack_depth <= MAX_STACK_DEPTH,
+        "{}",
+        binary.stack_depth
+    );
+    binary
+}
+
 /// How many neighbours on each side PLOC looks at for a node's best partner
 /// (obvhs' `PlocSearchDistance::Low`; the `medium` preset's 14 builds slower
 /// and no better here).
@@ -689,10 +717,16 @@ fn flatten(source: &[Bvh2Node], primitive_indices: &[u32]) -> BinaryTree {
             })
         },
     );
+    root_first(tree, root, source[0].aabb())
+}
+
+/// A tree numbered in post-order, root last, renumbered so that every parent
+/// comes before its children and the root is node 0. A tree that is a single
+/// leaf (`root_bounds` its box) still needs an inner node: the leaf is split
+/// in two (a one-triangle leaf appears twice, which is harmless).
+fn root_first(mut tree: BinaryTree, root: Flattened, root_bounds: &Aabb) -> BinaryTree {
     match root {
         Flattened::Inner(_) => {
-            // Post-order put the root last; reversed, every parent comes before
-            // its children and the root is node 0.
             let last = tree.nodes.len() as u32 - 1;
             tree.nodes.reverse();
             for node in &mut tree.nodes {
@@ -702,14 +736,11 @@ fn flatten(source: &[Bvh2Node], primitive_indices: &[u32]) -> BinaryTree {
             }
         }
         Flattened::Leaf { count, .. } => {
-            // A single-leaf tree still needs an inner node; split the leaf in two
-            // (a one-triangle leaf appears twice, which is harmless).
-            let root = source[0].aabb();
             let first_half = count.div_ceil(2);
             let half = |index: u32, count: u32| BvhChild {
-                min: root.min.to_array(),
+                min: root_bounds.min.to_array(),
                 index,
-                max: root.max.to_array(),
+                max: root_bounds.max.to_array(),
                 count,
             };
             let left = half(0, first_half);
@@ -724,6 +755,20 @@ fn flatten(source: &[Bvh2Node], primitive_indices: &[u32]) -> BinaryTree {
         }
     }
     tree
+}
+
+/// The child entry for a flattened subtree with box `bounds`.
+fn binary_child(flattened: Flattened, bounds: &Aabb) -> BvhChild {
+    let (index, count) = match flattened {
+        Flattened::Leaf { first, count } => (first, count),
+        Flattened::Inner(index) => (index, 0),
+    };
+    BvhChild {
+        min: bounds.min.to_array(),
+        index,
+        max: bounds.max.to_array(),
+        count,
+    }
 }
 
 /// The depth (the root's is 1) of the subtrees [`flatten`] walks in parallel:
@@ -796,21 +841,12 @@ fn walk(
                 continue;
             }
         }
-        let child = |flattened: Flattened, child_node: &Bvh2Node| {
-            let (index, count) = match flattened {
-                Flattened::Leaf { first, count } => (first, count),
-                Flattened::Inner(index) => (index, 0),
-            };
-            BvhChild {
-                min: child_node.aabb().min.to_array(),
-                index,
-                max: child_node.aabb().max.to_array(),
-                count,
-            }
-        };
         done.push(Flattened::Inner(tree.nodes.len() as u32));
         tree.nodes.push(BvhNode {
-            children: [child(left, sources[0]), child(right, sources[1])],
+            children: [
+                binary_child(left, sources[0].aabb()),
+                binary_child(right, sources[1].aabb()),
+            ],
         });
         tree.stack_depth = tree.stack_depth.max(depth);
     }
