@@ -419,7 +419,7 @@ pub fn load_part(
         mesh.scalars = mesh.scalars.as_ref().map(|_| vec![scalar_range[0]; 3]);
     }
     let triangles = mesh.triangles.len();
-    let scene = scene_setup::trace_scene(mesh, materials, progress, |e| {
+    let scene = scene_setup::trace_scene(mesh, materials, request.bvh, progress, |e| {
         format!(
             "error: the part of {origin} on rank {}: {e}",
             distribution.rank()

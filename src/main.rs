@@ -189,6 +189,9 @@ struct RunArgs {
     /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
+    /// How the BVH is built.
+    #[arg(long, value_enum, default_value_t = BvhChoice::Sah)]
+    bvh: BvhChoice,
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     backend: Backend,
     /// How the CPU backend runs a fused stage's element-wise ops.
@@ -210,6 +213,24 @@ struct RunArgs {
     quiet: bool,
     #[command(flatten)]
     compile: CompileArgs,
+}
+
+/// The BVH builders (`dpp_tracer::bvh::BvhBuilder`), by their command-line names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(crate) enum BvhChoice {
+    /// Top-down binned SAH (ours): the faster build and the cheaper tree.
+    Sah,
+    /// obvhs' PLOC, with reinsertion and our collapse of its leaves.
+    Ploc,
+}
+
+impl From<BvhChoice> for dpp_tracer::bvh::BvhBuilder {
+    fn from(choice: BvhChoice) -> Self {
+        match choice {
+            BvhChoice::Sah => dpp_tracer::bvh::BvhBuilder::BinnedSah,
+            BvhChoice::Ploc => dpp_tracer::bvh::BvhBuilder::Ploc,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -710,6 +731,7 @@ fn run_scene(
                     (stage.ops.iter()).any(|op| op.functor.as_deref() == Some("intersect"))
                 }),
                 field: args.field.clone(),
+                bvh: args.bvh.into(),
             },
             library,
             progress,

@@ -7,6 +7,7 @@ use crate::progress::Progress;
 use crate::volume_setup::{self, IsoRequest};
 use dpp_runtime::{FunctorLibrary, Uniforms};
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
+use dpp_tracer::bvh::BvhBuilder;
 use dpp_tracer::camera::tile_owner;
 use dpp_tracer::shading::MeshMaterials;
 use dpp_tracer::volume::generate::Dataset;
@@ -131,6 +132,8 @@ pub struct SceneRequest {
     pub traces_surface: bool,
     /// For a VTK file: the array to use (`NAME`, `NAME:mag`, `NAME:0`).
     pub field: Option<String>,
+    /// How the BVH is built.
+    pub bvh: BvhBuilder,
 }
 
 /// What a rank's share of a distributed run changes in its set-up.
@@ -285,7 +288,13 @@ pub fn load_scene(
             let failed =
                 |e: &dyn std::fmt::Display| format!("error: the built-in scene failed: {e}");
             let mesh = builtin_scene(*resolution).map_err(|e| failed(&e))?;
-            let scene = trace_scene(mesh, MeshMaterials::default(), progress, failed)?;
+            let scene = trace_scene(
+                mesh,
+                MeshMaterials::default(),
+                request.bvh,
+                progress,
+                failed,
+            )?;
             Ok((scene, "built-in mixing layer".to_string()))
         }
         [spec] if spec.is_volume(request.raw.as_deref()) => {
@@ -294,7 +303,7 @@ pub fn load_scene(
         [SceneSpec::File(path)] => {
             progress.phase(format!("loading {}", path.display()));
             let (mesh, materials) = load_mesh(path, request.field.as_deref())?;
-            let scene = trace_scene(mesh, materials, progress, |e| {
+            let scene = trace_scene(mesh, materials, request.bvh, progress, |e| {
                 format!("error: cannot use scene `{}`: {e}", path.display())
             })?;
             Ok((scene, path.display().to_string()))
@@ -310,6 +319,7 @@ pub fn load_scene(
             let scene = trace_scene(
                 concat_meshes(meshes),
                 MeshMaterials::default(),
+                request.bvh,
                 progress,
                 |e| format!("error: cannot use the pieces: {e}"),
             )?;
@@ -367,6 +377,7 @@ pub fn concat_meshes(meshes: Vec<TriangleMesh>) -> TriangleMesh {
 pub fn trace_scene(
     mut mesh: TriangleMesh,
     materials: MeshMaterials,
+    bvh: BvhBuilder,
     progress: &Progress,
     failed: impl Fn(&dyn std::fmt::Display) -> String,
 ) -> Result<TraceScene, String> {
@@ -382,7 +393,7 @@ pub fn trace_scene(
         mesh.add_crease_normals(dpp_tracer::scene::CREASE_ANGLE_DEGREES.to_radians());
     }
     progress.phase(format!("BVH over {} triangles", mesh.triangles.len()));
-    TraceScene::with_materials(mesh, materials).map_err(|e| failed(&e))
+    TraceScene::built_with(mesh, materials, bvh).map_err(|e| failed(&e))
 }
 
 /// A mesh file by its extension: `.obj` (with its MTL materials), `.ply`, or
@@ -474,6 +485,7 @@ fn volume_rendering(
         trace_scene(
             box_mesh(&volume.bounds()),
             MeshMaterials::default(),
+            request.bvh,
             progress,
             |e| format!("error: the box of `{origin}`: {e}"),
         )?
@@ -595,7 +607,7 @@ fn isosurface_scene(
         let field = volume_setup::load_volume(field, None, None)?;
         volume_setup::color_by(&mut mesh, &field);
     }
-    trace_scene(mesh, MeshMaterials::default(), progress, |e| {
+    trace_scene(mesh, MeshMaterials::default(), request.bvh, progress, |e| {
         format!("error: the isosurface of `{}`: {e}", spec.name())
     })
 }

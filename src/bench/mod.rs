@@ -32,6 +32,7 @@ use dpp_runtime::cpu::exec::{run_plan, RunContext};
 use dpp_runtime::interpret::{OpTiming, OutputValue, RunResult, StageTiming};
 use dpp_runtime::{CompileOptions, FunctorLibrary, Plan};
 use dpp_tracer::builtin_scene::builtin_scene;
+use dpp_tracer::bvh::BvhBuilder;
 use dpp_tracer::camera::sample_offset;
 use dpp_tracer::shading::MeshMaterials;
 use dpp_tracer::{Camera, StandardView, TraceScene, TriangleMesh, MISS_PRIM};
@@ -126,6 +127,9 @@ pub struct BenchArgs {
     /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
+    /// How dpp's BVH is built.
+    #[arg(long, value_enum, default_value_t = crate::BvhChoice::Sah)]
+    bvh: crate::BvhChoice,
     /// The backend that runs the plans. `gpu` opens the first adapter wgpu
     /// offers once for the whole bench (`WGPU_BACKEND`, `WGPU_ADAPTER_NAME` choose).
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
@@ -805,6 +809,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         gpu: gpu.map(GpuInfo::of),
         threads,
         cpu_elementwise: args.cpu_elementwise,
+        bvh: args.bvh,
         size: args.size,
         warmup: args.warmup,
         rounds: args.rounds,
@@ -913,6 +918,7 @@ fn scene_request(spec: &SceneSpec, view: &str, size: (u32, u32), iso: Option<f32
         fuse: true,
         render_volume: false,
         traces_surface: false,
+        bvh: BvhBuilder::default(),
     }
 }
 
@@ -958,7 +964,7 @@ fn load(spec: &SceneSpec, args: &BenchArgs, library: &FunctorLibrary) -> Result<
     }
     let normals = start.elapsed();
     let start = Instant::now();
-    let scene = TraceScene::with_materials(mesh, materials)
+    let scene = TraceScene::built_with(mesh, materials, args.bvh.into())
         .map_err(|e| Failure::Input(format!("error: {}: {e}", spec.name())))?;
     let bvh = start.elapsed();
     Ok(Loaded {

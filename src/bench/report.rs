@@ -67,6 +67,8 @@ pub struct Report {
     pub threads: usize,
     /// How the CPU backend ran element-wise ops (`--cpu-elementwise`).
     pub cpu_elementwise: crate::CpuElementwise,
+    /// How dpp's BVH was built (`--bvh`).
+    pub bvh: crate::BvhChoice,
     pub size: (u32, u32),
     pub warmup: u32,
     pub rounds: u32,
@@ -223,7 +225,11 @@ impl Report {
         } else {
             ""
         };
-        let _ = writeln!(md, "Build: the BVH of the loaded mesh (dpp: obvhs's PLOC build and our flattening{embree}). Trace rate: WORKLOAD1's primary rays over its `map<intersect>` stage (unfused plan), mean over the views, with that BVH behind `intersect`.\n");
+        let own_build = match self.bvh {
+            crate::BvhChoice::Sah => "our binned SAH build",
+            crate::BvhChoice::Ploc => "obvhs's PLOC build and our flattening",
+        };
+        let _ = writeln!(md, "Build: the BVH of the loaded mesh (dpp: {own_build}{embree}). Trace rate: WORKLOAD1's primary rays over its `map<intersect>` stage (unfused plan), mean over the views, with that BVH behind `intersect`.\n");
         let _ = writeln!(
             md,
             "| scene | BVH | build ms | build / dpp's | `map<intersect>` Mrays/s | rate / dpp's |"
@@ -252,7 +258,11 @@ impl Report {
                     ratio(rate, own_rate),
                 );
             };
-            row("dpp (obvhs PLOC)", Some(scene.bvh_ms), own_rate);
+            let own_bvh = match self.bvh {
+                crate::BvhChoice::Sah => "dpp (binned SAH)",
+                crate::BvhChoice::Ploc => "dpp (obvhs PLOC)",
+            };
+            row(own_bvh, Some(scene.bvh_ms), own_rate);
             for (engine, bvh, build) in [
                 (
                     Engine::EmbreeSingle,
@@ -743,6 +753,7 @@ impl Report {
             "backend": if self.gpu.is_some() { "gpu" } else { "cpu" },
             "cpu": self.cpu,
             "threads": self.threads,
+            "bvh": format!("{:?}", self.bvh).to_lowercase(),
             "size": [self.size.0, self.size.1],
             "warmup_rounds": self.warmup,
             "measured_rounds": self.rounds,

@@ -210,6 +210,26 @@ fn a_tiny_bench_writes_tables_json_and_a_chart() {
 }
 
 #[test]
+fn the_bvh_builder_is_chosen_and_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    for (choice, label) in [
+        (None, "| dpp (binned SAH) |"),
+        (Some("sah"), "| dpp (binned SAH) |"),
+        (Some("ploc"), "| dpp (obvhs PLOC) |"),
+    ] {
+        let mut more = vec!["--workloads", "1", "--json", "bench.json"];
+        more.extend(choice.iter().flat_map(|choice| ["--bvh", choice]));
+        let output = tiny_bench(&more, dir.path());
+        assert!(output.status.success(), "{}", text(&output.stderr));
+        let markdown = text(&output.stdout);
+        assert!(markdown.contains(label), "{choice:?}: {markdown}");
+        let json = bench_json(dir.path());
+        assert_eq!(json["bvh"], choice.unwrap_or("sah"));
+        assert!(json["scenes"][0]["bvh_build_ms"].as_f64().unwrap() > 0.0);
+    }
+}
+
+#[test]
 fn bad_bench_input_is_exit_status_2() {
     let dir = tempfile::tempdir().unwrap();
     let pipelines = pipelines();
@@ -226,6 +246,7 @@ fn bad_bench_input_is_exit_status_2() {
         (&["--backend", "tpu"], "invalid value 'tpu'"),
         (&["--embree-test", "fast"], "add embree to --engine"),
         (&["--embree-test", "exact"], "invalid value 'exact'"),
+        (&["--bvh", "lbvh"], "invalid value 'lbvh'"),
     ];
     for (args, expected) in cases {
         let mut all: Vec<&str> = base.to_vec();
@@ -357,7 +378,7 @@ fn an_embree_bench_compares_every_workload() {
     for build in ["embree_build_ms", "embree_high_build_ms"] {
         assert!(scene[build].as_f64().unwrap() > 0.0, "{build}");
     }
-    for heading in ["| dpp (obvhs PLOC) |", "| Embree high, 16-ray packets |"] {
+    for heading in ["| dpp (binned SAH) |", "| Embree high, 16-ray packets |"] {
         assert!(markdown.contains(heading), "{heading} missing:\n{markdown}");
     }
     // Time to first image: a row for dpp and for each of Embree's BVHs.

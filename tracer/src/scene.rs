@@ -1,7 +1,7 @@
 //! The scene data a run traces against, built once before any frame.
 
 use crate::builtin_scene::{builtin_scene, ResolutionOutOfRange};
-use crate::bvh::Bvh;
+use crate::bvh::{Bvh, BvhBuilder};
 use crate::cache::{ArcKeyedCache, BuiltOnce};
 use crate::camera::CameraSetup;
 use crate::functors::wgsl::buffers::{
@@ -69,10 +69,19 @@ impl TraceScene {
 
     /// As [`TraceScene::new`], with a material table (checked against the mesh).
     pub fn with_materials(
-        mut mesh: TriangleMesh,
+        mesh: TriangleMesh,
         materials: MeshMaterials,
     ) -> Result<TraceScene, SceneError> {
-        let bvh = Bvh::build(&mesh)?;
+        TraceScene::built_with(mesh, materials, BvhBuilder::default())
+    }
+
+    /// As [`TraceScene::with_materials`], the BVH made by a chosen builder.
+    pub fn built_with(
+        mut mesh: TriangleMesh,
+        materials: MeshMaterials,
+        builder: BvhBuilder,
+    ) -> Result<TraceScene, SceneError> {
+        let bvh = Bvh::build_with(&mesh, builder)?;
         // `build` validated the mesh, so it has triangles and therefore bounds.
         let bounds = mesh.bounds().ok_or(MeshError::NoTriangles)?;
         materials
