@@ -93,8 +93,9 @@ impl Stack {
 impl WideBvh {
     /// Collapses the binary tree: a wide node takes its binary node's two children
     /// and repeatedly opens the inner child with the largest surface area until it
-    /// has eight children or only leaves. The nodes are laid out on one thread, the
-    /// triangle groups (most of the bytes) filled in parallel afterwards.
+    /// has eight children or only leaves. The subtrees under the root's wide node
+    /// are laid out in parallel, each on one thread, and appended in lane order;
+    /// the triangle groups (most of the bytes) are filled in parallel afterwards.
     pub(super) fn build(nodes: &[BvhNode], triangles: &[BvhTriangle]) -> WideBvh {
         let ranges = subtree_ranges(nodes);
         // A child's triangles if it becomes a leaf here: binary leaves, and inner
@@ -106,46 +107,32 @@ impl WideBvh {
                 ranges[child.index as usize].filter(|&(_, count)| count as usize <= MERGE_LIMIT)
             }
         };
+        let root_children = open_children(nodes, &as_leaf, 0);
+        let parts: Vec<Option<WidePart>> = root_children
+            .par_iter()
+            .map(|child| {
+                as_leaf(child)
+                    .is_none()
+                    .then(|| lay_out(nodes, &as_leaf, child.index as usize))
+            })
+            .collect();
         // Every wide node takes at least one binary node; every leaf holds at
         // most one group that is not full.
         let mut wide_nodes = Vec::with_capacity(nodes.len());
         let mut groups = Vec::with_capacity(nodes.len() + 1 + triangles.len() / GROUP);
         wide_nodes.push(WideNode::empty());
-        let mut work = vec![(0usize, 0usize)];
-        let mut children: Vec<BvhChild> = Vec::with_capacity(WIDTH);
-        while let Some((binary, index)) = work.pop() {
-            children.clear();
-            children.extend_from_slice(&nodes[binary].children);
-            while children.len() < WIDTH {
-                // The inner child with the largest surface area opens first.
-                let widest = children
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, child)| child.count == 0 && as_leaf(child).is_none())
-                    .max_by(|(_, a), (_, b)| half_area(a).total_cmp(&half_area(b)));
-                let Some((open, _)) = widest else { break };
-                let [first, second] = nodes[children[open].index as usize].children;
-                children[open] = first;
-                children.insert(open + 1, second);
-            }
-            let mut node = WideNode::empty();
-            for (lane, child) in children.iter().enumerate() {
-                for axis in 0..3 {
-                    node.planes[axis][lane] = child.min[axis];
-                    node.planes[3 + axis][lane] = child.max[axis];
-                }
-                node.valid |= 1 << lane;
-                node.children[lane] = if let Some((first, count)) = as_leaf(child) {
+        let mut root = WideNode::empty();
+        for (lane, (child, part)) in root_children.iter().zip(parts).enumerate() {
+            root.children[lane] = match part {
+                Some(part) => part.append_to(&mut wide_nodes, &mut groups),
+                None => {
+                    let (first, count) = as_leaf(child).expect("a leaf child");
                     place_leaf(&mut groups, first, count)
-                } else {
-                    let below = wide_nodes.len();
-                    wide_nodes.push(WideNode::empty());
-                    work.push((child.index as usize, below));
-                    below as u32
-                };
-            }
-            wide_nodes[index] = node;
+                }
+            };
+            root.set_lane_box(lane, child);
         }
+        wide_nodes[0] = root;
         let wide = WideBvh {
             nodes: wide_nodes,
             groups: groups
@@ -176,6 +163,92 @@ impl WideBvh {
         }
         below[0] + 1
     }
+}
+
+/// A binary node's children for one wide node: its two, with the inner child
+/// of the largest surface area opened in its place until there are
+/// [`WIDTH`] or only leaves (`as_leaf`) are left.
+fn open_children(
+    nodes: &[BvhNode],
+    as_leaf: &impl Fn(&BvhChild) -> Option<(u32, u32)>,
+    binary: usize,
+) -> Vec<BvhChild> {
+    let mut children = Vec::with_capacity(WIDTH);
+    children.extend_from_slice(&nodes[binary].children);
+    while children.len() < WIDTH {
+        let widest = children
+            .iter()
+            .enumerate()
+            .filter(|(_, child)| child.count == 0 && as_leaf(child).is_none())
+            .max_by(|(_, a), (_, b)| half_area(a).total_cmp(&half_area(b)));
+        let Some((open, _)) = widest else { break };
+        let [first, second] = nodes[children[open].index as usize].children;
+        children[open] = first;
+        children.insert(open + 1, second);
+    }
+    children
+}
+
+/// A wide subtree laid out on its own: its nodes, root first and every
+/// node's children after it, and its groups' places, both numbered from 0.
+struct WidePart {
+    nodes: Vec<WideNode>,
+    groups: Vec<GroupPlace>,
+}
+
+impl WidePart {
+    /// Appends the part's nodes and groups, renumbered; returns its root's index.
+    fn append_to(self, nodes: &mut Vec<WideNode>, groups: &mut Vec<GroupPlace>) -> u32 {
+        let node_offset = nodes.len() as u32;
+        let group_offset = groups.len() as u32;
+        assert!(
+            groups.len() + self.groups.len() <= LEAF as usize,
+            "too many triangle groups"
+        );
+        nodes.extend(self.nodes.into_iter().map(|mut node| {
+            let count = node.valid.count_ones() as usize;
+            for child in &mut node.children[..count] {
+                *child += if *child & LEAF == 0 {
+                    node_offset
+                } else {
+                    group_offset
+                };
+            }
+            node
+        }));
+        groups.extend(self.groups);
+        node_offset
+    }
+}
+
+/// The wide subtree for binary node `binary`, on one thread: each node's
+/// inner children get consecutive numbers when the node is laid out.
+fn lay_out(
+    nodes: &[BvhNode],
+    as_leaf: &impl Fn(&BvhChild) -> Option<(u32, u32)>,
+    binary: usize,
+) -> WidePart {
+    let mut part = WidePart {
+        nodes: vec![WideNode::empty()],
+        groups: Vec::new(),
+    };
+    let mut work = vec![(binary, 0usize)];
+    while let Some((binary, index)) = work.pop() {
+        let mut node = WideNode::empty();
+        for (lane, child) in open_children(nodes, as_leaf, binary).iter().enumerate() {
+            node.children[lane] = if let Some((first, count)) = as_leaf(child) {
+                place_leaf(&mut part.groups, first, count)
+            } else {
+                let below = part.nodes.len();
+                part.nodes.push(WideNode::empty());
+                work.push((child.index as usize, below));
+                below as u32
+            };
+            node.set_lane_box(lane, child);
+        }
+        part.nodes[index] = node;
+    }
+    part
 }
 
 /// Where a [`TriangleGroup`] comes from: `lanes` leaf-order triangles from `first`.
@@ -226,6 +299,15 @@ fn place_leaf(groups: &mut Vec<GroupPlace>, first: u32, count: u32) -> u32 {
 }
 
 impl WideNode {
+    /// Makes lane `lane` valid with the child's box.
+    fn set_lane_box(&mut self, lane: usize, child: &BvhChild) {
+        for axis in 0..3 {
+            self.planes[axis][lane] = child.min[axis];
+            self.planes[3 + axis][lane] = child.max[axis];
+        }
+        self.valid |= 1 << lane;
+    }
+
     fn empty() -> WideNode {
         WideNode {
             planes: [
