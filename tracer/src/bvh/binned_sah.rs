@@ -2,10 +2,11 @@
 //! bounding volume hierarchies"), the kind Embree's default builder is: each
 //! node's triangles are binned by centroid along every axis, the split with the
 //! lowest surface area cost is taken, and the triangles are partitioned in
-//! place. obvhs' PLOC build and its reinsertion make trees of about the same
-//! cost but take longer than Embree's build; this one makes our binary layout
-//! straight away, with leaves decided by the same cost rule the PLOC path's
-//! collapse applies, so nothing is flattened or collapsed afterwards.
+//! place. obvhs' PLOC build and its reinsertion took longer than Embree's
+//! build; this one builds faster and makes trees of lower cost
+//! (docs/benchmarks.md). It makes our binary layout straight away, with
+//! leaves decided by the same cost rule the PLOC path's collapse applies, so
+//! nothing is flattened or collapsed afterwards.
 //!
 //! The tree depends only on the mesh, never on the number of threads: unions of
 //! boxes are exact in any order, counts are integers, and each node's costs are
@@ -16,7 +17,7 @@ use super::{
     MAX_LEAF_TRIANGLES, MAX_STACK_DEPTH,
 };
 use crate::mesh::TriangleMesh;
-use glam::{Vec3A, Vec4};
+use glam::{BVec4A, Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 use rayon::prelude::*;
 
@@ -57,9 +58,12 @@ struct PrimitiveReference {
 }
 
 impl PrimitiveReference {
+    /// The box's lower corner, its fourth lane zeroed by a bitwise select: the
+    /// index's bits there read as a subnormal float, and arithmetic on
+    /// subnormals can take a slow microcode path on some CPUs.
     #[inline(always)]
     fn min(&self) -> Vec3A {
-        Vec3A::from_vec4(self.min_and_id)
+        Vec3A::from_vec4(Vec4::select(XYZ, self.min_and_id, Vec4::ZERO))
     }
 
     #[inline(always)]
@@ -77,6 +81,9 @@ impl PrimitiveReference {
         self.min() + self.max()
     }
 }
+
+/// The first three lanes.
+const XYZ: BVec4A = BVec4A::new(true, true, true, false);
 
 /// A node's triangles' boxes joined, and the box of their doubled centroids.
 #[derive(Clone, Copy)]
