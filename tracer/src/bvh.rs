@@ -144,10 +144,9 @@ fn bvh_space_scale(mesh: &TriangleMesh) -> f32 {
 }
 
 impl Bvh {
-    /// Builds the hierarchy for a mesh (validated first). Uses obvhs' PLOC builder
-    /// and reinsertion ([`ploc_tree`]), then collapses leaves while flattening;
-    /// where the tree is deeper than [`MAX_STACK_DEPTH`], the subtrees that reach
-    /// past it are rebuilt by median split (`bvh/depth_limit.rs`).
+    /// Builds the hierarchy for a mesh (validated first) with the default
+    /// builder, [`BvhBuilder::BinnedSah`]; no inner node is deeper than
+    /// [`MAX_STACK_DEPTH`] whichever builder makes it.
     pub fn build(mesh: &TriangleMesh) -> Result<Bvh, MeshError> {
         Bvh::build_with(mesh, BvhBuilder::default())
     }

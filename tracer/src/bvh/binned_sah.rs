@@ -330,16 +330,8 @@ fn choose_split(
     if count <= MAX_LEAF_TRIANGLES as usize && as_leaf <= binned.cost {
         return None;
     }
-    let (left_count, centroids) = if count < PARALLEL_PASS_MIN {
-        partition(references, scratch, |reference| binned.goes_left(reference))
-    } else {
-        // The partition stays serial; the centroids' bounds are found in parallel.
-        let (left_count, _) =
-            partition(references, scratch, |reference| binned.goes_left(reference));
-        let (left, right) = references.split_at(left_count);
-        let (left, right) = rayon::join(|| bounds_of(left), || bounds_of(right));
-        (left_count, [left.centroids, right.centroids])
-    };
+    let (left_count, centroids) =
+        partition(references, scratch, |reference| binned.goes_left(reference));
     debug_assert_eq!(left_count, binned.left_count);
     Some(Split {
         left_count,

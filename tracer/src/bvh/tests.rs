@@ -1306,7 +1306,7 @@ fn the_tree_does_not_depend_on_the_thread_count() {
     // with the core count would change images.
     // The binned build joins bins and bounds in parallel above 65536
     // triangles and builds subtrees in parallel above 8192: this mesh has
-    // about 190 000.
+    // 240 054.
     let mesh = builtin_scene(200).unwrap();
     for builder in BUILDERS {
         let build_with = |threads: usize| {

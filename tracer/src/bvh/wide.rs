@@ -107,14 +107,12 @@ impl WideBvh {
                 ranges[child.index as usize].filter(|&(_, count)| count as usize <= MERGE_LIMIT)
             }
         };
-        let root_children = open_children(nodes, &as_leaf, 0);
-        let parts: Vec<Option<WidePart>> = root_children
+        let mut root_children = Vec::with_capacity(WIDTH);
+        open_children(nodes, &as_leaf, 0, &mut root_children);
+        // Each lane: its leaf's triangles, or its subtree laid out.
+        let lanes: Vec<Result<(u32, u32), WidePart>> = root_children
             .par_iter()
-            .map(|child| {
-                as_leaf(child)
-                    .is_none()
-                    .then(|| lay_out(nodes, &as_leaf, child.index as usize))
-            })
+            .map(|child| as_leaf(child).ok_or_else(|| lay_out(nodes, &as_leaf, child.index)))
             .collect();
         // Every wide node takes at least one binary node; every leaf holds at
         // most one group that is not full.
@@ -122,13 +120,10 @@ impl WideBvh {
         let mut groups = Vec::with_capacity(nodes.len() + 1 + triangles.len() / GROUP);
         wide_nodes.push(WideNode::empty());
         let mut root = WideNode::empty();
-        for (lane, (child, part)) in root_children.iter().zip(parts).enumerate() {
-            root.children[lane] = match part {
-                Some(part) => part.append_to(&mut wide_nodes, &mut groups),
-                None => {
-                    let (first, count) = as_leaf(child).expect("a leaf child");
-                    place_leaf(&mut groups, first, count)
-                }
+        for (lane, (child, content)) in root_children.iter().zip(lanes).enumerate() {
+            root.children[lane] = match content {
+                Ok((first, count)) => place_leaf(&mut groups, first, count),
+                Err(part) => part.append_to(&mut wide_nodes, &mut groups),
             };
             root.set_lane_box(lane, child);
         }
@@ -167,14 +162,15 @@ impl WideBvh {
 
 /// A binary node's children for one wide node: its two, with the inner child
 /// of the largest surface area opened in its place until there are
-/// [`WIDTH`] or only leaves (`as_leaf`) are left.
+/// [`WIDTH`] or only leaves (`as_leaf`) are left; into `children`, emptied first.
 fn open_children(
     nodes: &[BvhNode],
     as_leaf: &impl Fn(&BvhChild) -> Option<(u32, u32)>,
-    binary: usize,
-) -> Vec<BvhChild> {
-    let mut children = Vec::with_capacity(WIDTH);
-    children.extend_from_slice(&nodes[binary].children);
+    binary: u32,
+    children: &mut Vec<BvhChild>,
+) {
+    children.clear();
+    children.extend_from_slice(&nodes[binary as usize].children);
     while children.len() < WIDTH {
         let widest = children
             .iter()
@@ -186,7 +182,6 @@ fn open_children(
         children[open] = first;
         children.insert(open + 1, second);
     }
-    children
 }
 
 /// A wide subtree laid out on its own: its nodes, root first and every
@@ -226,22 +221,24 @@ impl WidePart {
 fn lay_out(
     nodes: &[BvhNode],
     as_leaf: &impl Fn(&BvhChild) -> Option<(u32, u32)>,
-    binary: usize,
+    binary: u32,
 ) -> WidePart {
     let mut part = WidePart {
         nodes: vec![WideNode::empty()],
         groups: Vec::new(),
     };
     let mut work = vec![(binary, 0usize)];
+    let mut children = Vec::with_capacity(WIDTH);
     while let Some((binary, index)) = work.pop() {
+        open_children(nodes, as_leaf, binary, &mut children);
         let mut node = WideNode::empty();
-        for (lane, child) in open_children(nodes, as_leaf, binary).iter().enumerate() {
+        for (lane, child) in children.iter().enumerate() {
             node.children[lane] = if let Some((first, count)) = as_leaf(child) {
                 place_leaf(&mut part.groups, first, count)
             } else {
                 let below = part.nodes.len();
                 part.nodes.push(WideNode::empty());
-                work.push((child.index as usize, below));
+                work.push((child.index, below));
                 below as u32
             };
             node.set_lane_box(lane, child);
