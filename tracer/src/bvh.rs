@@ -18,7 +18,7 @@
 //! gives bit-identical answers. The binary traversal stays as the reference
 //! ([`Bvh::intersect_closest_binary`]), which the GPU shaders mirror.
 
-use crate::mesh::{MeshError, TriangleMesh};
+use crate::mesh::{Bounds, MeshError, TriangleMesh};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use obvhs::aabb::Aabb;
@@ -125,10 +125,7 @@ const UNSCALED_EXPONENTS: std::ops::RangeInclusive<i32> = -20..=20;
 /// the box and triangle tests exactly, so the traversal visits the same nodes
 /// and finds the same triangle, `u` and `v`, and `t` times the scale, which
 /// [`Bvh::hit_record`] divides out exactly.
-fn bvh_space_scale(mesh: &TriangleMesh) -> f32 {
-    let Some(bounds) = mesh.bounds() else {
-        return 1.0;
-    };
+fn bvh_space_scale(bounds: &Bounds) -> f32 {
     let largest = bounds.min.abs().max(bounds.max.abs()).max_element();
     if largest == 0.0 {
         return 1.0;
@@ -153,8 +150,8 @@ impl Bvh {
 
     /// [`Bvh::build`] by a chosen builder.
     pub fn build_with(mesh: &TriangleMesh, builder: BvhBuilder) -> Result<Bvh, MeshError> {
-        mesh.validate()?;
-        let scale = bvh_space_scale(mesh);
+        let bounds = mesh.validated_bounds()?;
+        let scale = bvh_space_scale(&bounds);
         let mut bvh = if scale == 1.0 {
             Bvh::build_unscaled(mesh, builder)
         } else {
