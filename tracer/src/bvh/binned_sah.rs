@@ -36,7 +36,13 @@ pub(super) fn binned_sah_tree(mesh: &TriangleMesh) -> BinaryTree {
         .collect();
     let root = bounds_of(&references);
     let mut scratch = references.clone();
-    let subtree = build_subtree(&mut references, &mut scratch, 0, root, 1);
+    let whole = NodeReferences {
+        held: &mut references,
+        spare: &mut scratch,
+        held_in_scratch: false,
+        first: 0,
+    };
+    let subtree = build_subtree(whole, root, 1);
     let mut tree = BinaryTree {
         nodes: Vec::with_capacity(references.len()),
         triangle_ids: Vec::new(),
@@ -166,30 +172,46 @@ enum Subtree {
     },
 }
 
-/// Builds the subtree over `references`, which sit at `first` in the whole
-/// array (the leaves' triangle numbers), at `depth` (the root's is 1).
-fn build_subtree(
-    references: &mut [PrimitiveReference],
-    scratch: &mut [PrimitiveReference],
+/// A node's references: `held` holds them, in the whole array or in the
+/// scratch array (a partition moves them from one to the other, and the
+/// children go on from there), and `spare` is the same range of the other.
+/// They sit at `first` in both (the leaves' triangle numbers).
+struct NodeReferences<'a> {
+    held: &'a mut [PrimitiveReference],
+    spare: &'a mut [PrimitiveReference],
+    held_in_scratch: bool,
     first: u32,
-    node: NodeBounds,
-    depth: usize,
-) -> Subtree {
-    if references.len() < PARALLEL_SUBTREE_MIN {
+}
+
+impl NodeReferences<'_> {
+    /// The node as a leaf, its references put back in the whole array if
+    /// the last partition left them in the scratch one.
+    fn leaf(self) -> Flattened {
+        if self.held_in_scratch {
+            self.spare.copy_from_slice(self.held);
+        }
+        Flattened::Leaf {
+            first: self.first,
+            count: self.held.len() as u32,
+        }
+    }
+}
+
+/// Builds the subtree over a node's references at `depth` (the root's is 1).
+fn build_subtree(references: NodeReferences<'_>, node: NodeBounds, depth: usize) -> Subtree {
+    if references.held.len() < PARALLEL_SUBTREE_MIN {
         let mut part = BinaryTree::default();
         let mut bins = [[Bin::EMPTY; MAX_BINS]; 3];
-        let flattened = build_serial(
-            references, scratch, first, node, depth, &mut part, &mut bins,
-        );
+        let flattened = build_serial(references, node, depth, &mut part, &mut bins);
         return Subtree::Part(part, flattened);
     }
     let mut bins = [[Bin::EMPTY; MAX_BINS]; 3];
-    let split = choose_split(references, scratch, &node, depth, &mut bins)
+    let split = choose_split(references.held, references.spare, &node, depth, &mut bins)
         .expect("a node too large for a leaf always splits");
-    let [left, right] = sides(references, scratch, first, &split);
+    let [(left, left_bounds), (right, right_bounds)] = sides(references, &split);
     let (left_subtree, right_subtree) = rayon::join(
-        || build_subtree(left.0, left.1, left.2, left.3, depth + 1),
-        || build_subtree(right.0, right.1, right.2, right.3, depth + 1),
+        || build_subtree(left, left_bounds, depth + 1),
+        || build_subtree(right, right_bounds, depth + 1),
     );
     Subtree::Split {
         children: Box::new([left_subtree, right_subtree]),
@@ -201,23 +223,18 @@ fn build_subtree(
 /// Builds the subtree over `references` into `tree`, in post-order (`bins`:
 /// scratch space, used before the children are built).
 fn build_serial(
-    references: &mut [PrimitiveReference],
-    scratch: &mut [PrimitiveReference],
-    first: u32,
+    references: NodeReferences<'_>,
     node: NodeBounds,
     depth: usize,
     tree: &mut BinaryTree,
     bins: &mut Bins,
 ) -> Flattened {
-    let Some(split) = choose_split(references, scratch, &node, depth, bins) else {
-        return Flattened::Leaf {
-            first,
-            count: references.len() as u32,
-        };
+    let Some(split) = choose_split(references.held, references.spare, &node, depth, bins) else {
+        return references.leaf();
     };
-    let [left, right] = sides(references, scratch, first, &split);
-    let left = build_serial(left.0, left.1, left.2, left.3, depth + 1, tree, bins);
-    let right = build_serial(right.0, right.1, right.2, right.3, depth + 1, tree, bins);
+    let [(left, left_bounds), (right, right_bounds)] = sides(references, &split);
+    let left = build_serial(left, left_bounds, depth + 1, tree, bins);
+    let right = build_serial(right, right_bounds, depth + 1, tree, bins);
     push_inner_node(
         tree,
         [left, right],
@@ -226,29 +243,42 @@ fn build_serial(
     )
 }
 
-/// A split node's sides: each one's references, scratch space, first
-/// triangle and bounds.
-type Side<'a> = (
-    &'a mut [PrimitiveReference],
-    &'a mut [PrimitiveReference],
-    u32,
-    NodeBounds,
-);
-
+/// A split node's sides: each one's references and bounds.
 fn sides<'a>(
-    references: &'a mut [PrimitiveReference],
-    scratch: &'a mut [PrimitiveReference],
-    first: u32,
+    references: NodeReferences<'a>,
     split: &Split,
-) -> [Side<'a>; 2] {
-    let (left, right) = references.split_at_mut(split.left_count);
-    let (left_scratch, right_scratch) = scratch.split_at_mut(split.left_count);
+) -> [(NodeReferences<'a>, NodeBounds); 2] {
+    let NodeReferences {
+        held,
+        spare,
+        held_in_scratch,
+        first,
+    } = references;
+    // A partition left the references in the other array.
+    let (held, spare, held_in_scratch) = if split.moved {
+        (spare, held, !held_in_scratch)
+    } else {
+        (held, spare, held_in_scratch)
+    };
+    let (left, right) = held.split_at_mut(split.left_count);
+    let (left_spare, right_spare) = spare.split_at_mut(split.left_count);
     [
-        (left, left_scratch, first, split.children[0]),
         (
-            right,
-            right_scratch,
-            first + split.left_count as u32,
+            NodeReferences {
+                held: left,
+                spare: left_spare,
+                held_in_scratch,
+                first,
+            },
+            split.children[0],
+        ),
+        (
+            NodeReferences {
+                held: right,
+                spare: right_spare,
+                held_in_scratch,
+                first: first + split.left_count as u32,
+            },
             split.children[1],
         ),
     ]
@@ -293,13 +323,16 @@ fn assemble(subtree: Subtree, tree: &mut BinaryTree) -> Flattened {
 }
 
 /// A node's split: how many triangles go left (they are moved to the front),
-/// and both sides' bounds.
+/// both sides' bounds, and whether the references were moved to the other
+/// array (a partition) or reordered where they are (a median split).
 struct Split {
     left_count: usize,
     children: [NodeBounds; 2],
+    moved: bool,
 }
 
-/// Partitions `references` by the cheapest split, or returns `None` where one
+/// Partitions `references` by the cheapest split (into `scratch`, or where
+/// they are for a median split), or returns `None` where one
 /// leaf costs no more (it must hold at most [`MAX_LEAF_TRIANGLES`]). Where the
 /// depth left could not take a tree of unbalanced splits, or all centroids
 /// coincide, it splits at the median instead, so no inner node is deeper than
@@ -340,6 +373,7 @@ fn choose_split(
             bounds: binned.bounds[side],
             centroids: centroids[side],
         }),
+        moved: true,
     })
 }
 
@@ -357,16 +391,18 @@ fn median_split(references: &mut [PrimitiveReference], node: &NodeBounds) -> Spl
     Split {
         left_count: middle,
         children: [bounds_of(left), bounds_of(right)],
+        moved: false,
     }
 }
 
-/// Moves the references `goes_left` takes to the front, returning how many,
-/// and the boxes of both sides' doubled centroids. Without branches on the
-/// side (it is as good as random): each reference is written to the next free
-/// place at the front or the back of `scratch` (the back fills backwards),
-/// which is then copied over `references`.
+/// Moves the references `goes_left` takes to the front of `scratch` and the
+/// others to its back, returning how many went to the front, and the boxes
+/// of both sides' doubled centroids. Without branches on the side (it is as
+/// good as random): each reference is written to the next free place at the
+/// front or the back (the back fills backwards). The children go on in
+/// `scratch`, so nothing is copied back (a leaf puts its few back).
 fn partition(
-    references: &mut [PrimitiveReference],
+    references: &[PrimitiveReference],
     scratch: &mut [PrimitiveReference],
     goes_left: impl Fn(&PrimitiveReference) -> bool,
 ) -> (usize, [Aabb; 2]) {
@@ -382,7 +418,6 @@ fn partition(
         side.min = side.min.min(centroid);
         side.max = side.max.max(centroid);
     }
-    references.copy_from_slice(scratch);
     (left, centroids)
 }
 
