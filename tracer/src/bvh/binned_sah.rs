@@ -17,7 +17,7 @@ use super::{
     MAX_LEAF_TRIANGLES, MAX_STACK_DEPTH,
 };
 use crate::mesh::TriangleMesh;
-use glam::{BVec4A, Vec3A, Vec4};
+use glam::{BVec3A, BVec4A, Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 use rayon::prelude::*;
 
@@ -364,7 +364,7 @@ fn choose_split(
         return None;
     }
     let (left_count, centroids) =
-        partition(references, scratch, |reference| binned.goes_left(reference));
+        partition(references, scratch, |centroid| binned.goes_left(centroid));
     debug_assert_eq!(left_count, binned.left_count);
     Some(Split {
         left_count,
@@ -395,7 +395,7 @@ fn median_split(references: &mut [PrimitiveReference], node: &NodeBounds) -> Spl
     }
 }
 
-/// Moves the references `goes_left` takes to the front of `scratch` and the
+/// Moves the references whose doubled centroid `goes_left` takes to the front of `scratch` and the
 /// others to its back, returning how many went to the front, and the boxes
 /// of both sides' doubled centroids. Without branches on the side (it is as
 /// good as random): each reference is written to the next free place at the
@@ -404,21 +404,26 @@ fn median_split(references: &mut [PrimitiveReference], node: &NodeBounds) -> Spl
 fn partition(
     references: &[PrimitiveReference],
     scratch: &mut [PrimitiveReference],
-    goes_left: impl Fn(&PrimitiveReference) -> bool,
+    goes_left: impl Fn(Vec3A) -> bool,
 ) -> (usize, [Aabb; 2]) {
     let (mut left, mut right) = (0, references.len());
-    let mut centroids = [Aabb::INVALID; 2];
+    let (mut left_box, mut right_box) = (Aabb::INVALID, Aabb::INVALID);
     for reference in references.iter() {
-        let is_left = goes_left(reference);
+        let centroid = reference.doubled_centroid();
+        let is_left = goes_left(centroid);
         scratch[if is_left { left } else { right - 1 }] = *reference;
         left += usize::from(is_left);
         right -= usize::from(!is_left);
-        let centroid = reference.doubled_centroid();
-        let side = &mut centroids[usize::from(!is_left)];
-        side.min = side.min.min(centroid);
-        side.max = side.max.max(centroid);
+        // Both boxes stay in registers, each grown or kept by a select: with
+        // the side's box picked by index, each update waited on the store
+        // of the one before it.
+        let to_left = BVec3A::splat(is_left);
+        left_box.min = Vec3A::select(to_left, left_box.min.min(centroid), left_box.min);
+        left_box.max = Vec3A::select(to_left, left_box.max.max(centroid), left_box.max);
+        right_box.min = Vec3A::select(to_left, right_box.min, right_box.min.min(centroid));
+        right_box.max = Vec3A::select(to_left, right_box.max, right_box.max.max(centroid));
     }
-    (left, centroids)
+    (left, [left_box, right_box])
 }
 
 /// A bin: the boxes of the triangles whose centroids fall in it, and their number.
@@ -459,13 +464,15 @@ impl Binning {
         truncate(position)
     }
 
-    /// Whether [`Binning::bins_of`] along `axis` is below `bin` (at most the
-    /// last bin): the same operations on that lane, compared before the clamp
-    /// and the truncation, which change no such comparison.
+    /// Whether [`Binning::bins_of`] of a reference with this doubled
+    /// centroid is below `bin` (at most the last bin) along `axis`: the same
+    /// operations, compared before the clamp and the truncation, which change
+    /// no such comparison. All lanes are compared and the axis's bit is read
+    /// from the mask, so no lane leaves its register.
     #[inline(always)]
-    fn is_below(&self, reference: &PrimitiveReference, axis: usize, bin: f32) -> bool {
-        let centroid = reference.min()[axis] + reference.max()[axis];
-        (centroid - self.offset[axis]) * self.scale[axis] < bin
+    fn is_below(&self, doubled_centroid: Vec3A, axis: usize, bin: f32) -> bool {
+        let position = (doubled_centroid - self.offset) * self.scale;
+        position.cmplt(Vec3A::splat(bin)).bitmask() & (1 << axis) != 0
     }
 }
 
@@ -497,9 +504,9 @@ struct BinnedSplit {
 
 impl BinnedSplit {
     #[inline(always)]
-    fn goes_left(&self, reference: &PrimitiveReference) -> bool {
+    fn goes_left(&self, doubled_centroid: Vec3A) -> bool {
         self.binning
-            .is_below(reference, self.axis, self.first_right_bin)
+            .is_below(doubled_centroid, self.axis, self.first_right_bin)
     }
 }
 
