@@ -30,6 +30,7 @@ use rayon::prelude::*;
 
 mod binned_sah;
 mod depth_limit;
+mod huge_pages;
 mod simd;
 mod wide;
 
@@ -181,14 +182,11 @@ impl Bvh {
     /// Copies the triangles into leaf order (in parallel) and collapses the
     /// eight-wide tree.
     fn from_binary(binary: BinaryTree, mesh: &TriangleMesh) -> Bvh {
-        let triangles: Vec<BvhTriangle> = binary
-            .triangle_ids
-            .par_iter()
-            .map(|&id| {
-                let [v0, v1, v2] = mesh.triangle_vertices(id as usize).map(|v| v.to_array());
-                BvhTriangle { v0, v1, v2 }
-            })
-            .collect();
+        let mut triangles = huge_pages::vec_on_huge_pages(binary.triangle_ids.len());
+        triangles.par_extend(binary.triangle_ids.par_iter().map(|&id| {
+            let [v0, v1, v2] = mesh.triangle_vertices(id as usize).map(|v| v.to_array());
+            BvhTriangle { v0, v1, v2 }
+        }));
         let wide = wide::WideBvh::build(&binary.nodes, &triangles);
         Bvh {
             nodes: binary.nodes,

@@ -12,6 +12,7 @@
 //! boxes are exact in any order, counts are integers, and each node's costs are
 //! summed on one thread.
 
+use super::huge_pages::vec_on_huge_pages;
 use super::{
     binary_child, root_first, splice, BinaryTree, BvhNode, Flattened, COLLAPSE_TRAVERSAL_COST,
     MAX_LEAF_TRIANGLES, MAX_STACK_DEPTH,
@@ -23,19 +24,19 @@ use rayon::prelude::*;
 
 /// The binary tree of a (validated) mesh, leaves in depth-first order.
 pub(super) fn binned_sah_tree(mesh: &TriangleMesh) -> BinaryTree {
-    let mut references: Vec<PrimitiveReference> = (0..mesh.triangles.len() as u32)
-        .into_par_iter()
-        .map(|id| {
-            let vertices = mesh.triangle_vertices(id as usize).map(Vec3A::from);
-            let bounds = Aabb::from_points(&vertices);
-            PrimitiveReference {
-                min_and_id: bounds.min.extend(f32::from_bits(id)),
-                max: bounds.max.extend(0.0),
-            }
-        })
-        .collect();
+    let count = mesh.triangles.len();
+    let mut references = vec_on_huge_pages(count);
+    references.par_extend((0..count as u32).into_par_iter().map(|id| {
+        let vertices = mesh.triangle_vertices(id as usize).map(Vec3A::from);
+        let bounds = Aabb::from_points(&vertices);
+        PrimitiveReference {
+            min_and_id: bounds.min.extend(f32::from_bits(id)),
+            max: bounds.max.extend(0.0),
+        }
+    }));
     let root = bounds_of(&references);
-    let mut scratch = references.clone();
+    let mut scratch = vec_on_huge_pages(count);
+    scratch.par_extend(references.par_iter().copied());
     let whole = NodeReferences {
         held: &mut references,
         spare: &mut scratch,
@@ -44,7 +45,7 @@ pub(super) fn binned_sah_tree(mesh: &TriangleMesh) -> BinaryTree {
     };
     let subtree = build_subtree(whole, root, 1);
     let mut tree = BinaryTree {
-        nodes: Vec::with_capacity(references.len()),
+        nodes: vec_on_huge_pages(references.len()),
         triangle_ids: Vec::new(),
         stack_depth: 1,
     };

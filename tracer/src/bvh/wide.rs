@@ -16,6 +16,7 @@
 //! shared edge or vertex, or overlapping copies of a surface, as CAD meshes have)
 //! every traversal keeps the one with the lowest leaf-order index.
 
+use super::huge_pages::vec_on_huge_pages;
 use super::simd::{Lanes, Lanes8, LanesExt, Portable};
 use super::{Bvh, BvhChild, BvhNode, BvhTriangle, PreparedRay, Ray, ROBUST_FAR_SCALE};
 use packet::{is_packet, packet_key, single_rays_below, trace_packet, PacketStack, MAX_PACKET};
@@ -116,7 +117,7 @@ impl WideBvh {
             .collect();
         // Every wide node takes at least one binary node; every leaf holds at
         // most one group that is not full.
-        let mut wide_nodes = Vec::with_capacity(nodes.len());
+        let mut wide_nodes = vec_on_huge_pages(nodes.len());
         let mut groups = Vec::with_capacity(nodes.len() + 1 + triangles.len() / GROUP);
         wide_nodes.push(WideNode::empty());
         let mut root = WideNode::empty();
@@ -128,12 +129,11 @@ impl WideBvh {
             root.set_lane_box(lane, child);
         }
         wide_nodes[0] = root;
+        let mut filled = vec_on_huge_pages(groups.len());
+        filled.par_extend(groups.par_iter().map(|place| place.fill(triangles)));
         let wide = WideBvh {
             nodes: wide_nodes,
-            groups: groups
-                .par_iter()
-                .map(|place| place.fill(triangles))
-                .collect(),
+            groups: filled,
         };
         assert!(
             wide.stack_bound() <= STACK_ENTRIES,
