@@ -167,11 +167,33 @@ impl<T: MonoidElement> Monoid<T> {
         T::combine(self.op, a, b)
     }
 
-    /// `start op values[0] op values[1] …`, left to right.
+    /// `start op values[0] op values[1] …`, left to right, with the
+    /// operation matched once, outside the loop ([`per_operation`]).
     pub(crate) fn fold(self, start: T, values: &[T]) -> T {
-        values.iter().fold(start, |accumulated, &value| {
-            self.combine(accumulated, value)
-        })
+        per_operation(self.op, |op| fold_with(op, start, values))
+    }
+}
+
+#[inline(always)]
+fn fold_with<T: MonoidElement>(op: MonoidOp, start: T, values: &[T]) -> T {
+    values.iter().fold(start, |accumulated, &value| {
+        T::combine(op, accumulated, value)
+    })
+}
+
+/// `body(op)`, with `op` a constant in each arm, so that a loop in `body`
+/// is compiled once per operation with no `match` per element: with the
+/// `match` inside, a loop ran 3-4x slower than a plain map
+/// (docs/benchmarks.md, "Shading written as expressions").
+#[inline(always)]
+fn per_operation<R>(op: MonoidOp, body: impl Fn(MonoidOp) -> R) -> R {
+    match op {
+        MonoidOp::Add => body(MonoidOp::Add),
+        MonoidOp::Mul => body(MonoidOp::Mul),
+        MonoidOp::Min => body(MonoidOp::Min),
+        MonoidOp::Max => body(MonoidOp::Max),
+        MonoidOp::Or => body(MonoidOp::Or),
+        MonoidOp::And => body(MonoidOp::And),
     }
 }
 
@@ -210,20 +232,9 @@ pub fn combine_columns(
     with_element_type!(a.elem_type(), primitive, T => {
         Monoid::<T>::new(op)?;
         let (a, b) = (typed_slice::<T>(a)?, typed_slice::<T>(b)?);
-        // One loop per operation, the operation a constant in each: with the
-        // `match` inside one loop, that loop ran 3-4x slower than a plain
-        // map (docs/benchmarks.md, "Shading written as expressions").
-        let zip = |op: MonoidOp| -> Vec<T> {
+        Ok(T::into_column(per_operation(op, |op| -> Vec<T> {
             a.iter().zip(b).map(|(&x, &y)| T::combine(op, x, y)).collect()
-        };
-        Ok(T::into_column(match op {
-            MonoidOp::Add => zip(MonoidOp::Add),
-            MonoidOp::Mul => zip(MonoidOp::Mul),
-            MonoidOp::Min => zip(MonoidOp::Min),
-            MonoidOp::Max => zip(MonoidOp::Max),
-            MonoidOp::Or => zip(MonoidOp::Or),
-            MonoidOp::And => zip(MonoidOp::And),
-        }))
+        })))
     }, record => Err(unsupported(op, record)))
 }
 
@@ -238,8 +249,13 @@ pub fn reduce_groups(
         return Err(KernelError::EmptyGroup);
     }
     with_element_type!(values.elem_type(), primitive, T => {
-        let monoid = Monoid::<T>::new(op)?;
-        let groups = typed_slice::<T>(values)?.chunks_exact(group);
-        Ok(T::into_column(groups.map(|group| monoid.fold(monoid.identity, group)).collect()))
+        let identity = Monoid::<T>::new(op)?.identity;
+        let values = typed_slice::<T>(values)?;
+        Ok(T::into_column(per_operation(op, |op| -> Vec<T> {
+            values
+                .chunks_exact(group)
+                .map(|group| fold_with(op, identity, group))
+                .collect()
+        })))
     }, record => Err(unsupported(op, record)))
 }
