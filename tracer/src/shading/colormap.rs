@@ -42,8 +42,9 @@ pub const COLORMAP_NAMES: [&str; 8] = [
 #[derive(Clone, Debug, PartialEq)]
 pub struct ColorMap {
     name: String,
-    srgb: Vec<Vec3>,
-    linear: Vec<Vec3>,
+    // Arrays of the table's size, so that a lookup needs no bounds check.
+    srgb: [Vec3; COLORMAP_SIZE],
+    linear: [Vec3; COLORMAP_SIZE],
     opacity: Vec<f32>,
 }
 
@@ -77,13 +78,11 @@ impl ColorMap {
 
     /// `gradient` sampled at the table's points, with `opacity` (one per point).
     pub(crate) fn sampled(name: String, gradient: &dyn Gradient, opacity: Vec<f32>) -> ColorMap {
-        let srgb: Vec<Vec3> = (0..COLORMAP_SIZE)
-            .map(|i| {
-                let color = gradient.at(i as f32 / (COLORMAP_SIZE - 1) as f32);
-                Vec3::new(color.r, color.g, color.b).clamp(Vec3::ZERO, Vec3::ONE)
-            })
-            .collect();
-        let linear = srgb.iter().map(|&c| srgb_to_linear(c)).collect();
+        let srgb: [Vec3; COLORMAP_SIZE] = std::array::from_fn(|i| {
+            let color = gradient.at(i as f32 / (COLORMAP_SIZE - 1) as f32);
+            Vec3::new(color.r, color.g, color.b).clamp(Vec3::ZERO, Vec3::ONE)
+        });
+        let linear = srgb.map(srgb_to_linear);
         ColorMap {
             name,
             srgb,
@@ -152,12 +151,14 @@ impl ColorMap {
 fn table_point(t: f32) -> (usize, f32) {
     let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
     let x = t * (COLORMAP_SIZE - 1) as f32;
-    let low = (x as usize).min(COLORMAP_SIZE - 2);
-    (low, x - low as f32)
+    // `x` is in [0, 255]: as u32 it converts as `as usize` did, and the
+    // bound below lets a lookup in a table of 256 skip its bounds checks.
+    let low = (x as u32).min(COLORMAP_SIZE as u32 - 2);
+    (low as usize, x - low as f32)
 }
 
 #[inline]
-fn lerp_table(table: &[Vec3], t: f32) -> Vec3 {
+fn lerp_table(table: &[Vec3; COLORMAP_SIZE], t: f32) -> Vec3 {
     let (low, frac) = table_point(t);
     table[low].lerp(table[low + 1], frac)
 }
