@@ -83,19 +83,18 @@ pub enum MeshError {
 pub const MAX_COORDINATE: f32 = 1e18;
 pub const MIN_LARGEST_COORDINATE: f32 = 1e-18;
 
-/// Triangles per parallel chunk of [`TriangleMesh::bounds`].
-const BOUNDS_CHUNK: usize = 1 << 14;
+/// Elements per parallel chunk of the mesh's checks and bounds.
+const PARALLEL_CHUNK: usize = 1 << 14;
 
 /// The index of the first element of `items` that is `bad`, searched in
 /// parallel chunks (the first one, whatever the thread count).
 fn first_where<T: Sync>(items: &[T], bad: impl Fn(&T) -> bool + Sync) -> Option<usize> {
-    const CHUNK: usize = 1 << 14;
     items
-        .par_chunks(CHUNK)
+        .par_chunks(PARALLEL_CHUNK)
         .enumerate()
         .find_map_first(|(number, chunk)| {
             let within = chunk.iter().position(&bad)?;
-            Some(number * CHUNK + within)
+            Some(number * PARALLEL_CHUNK + within)
         })
 }
 
@@ -191,7 +190,7 @@ impl TriangleMesh {
         };
         let joined = self
             .triangles
-            .par_chunks(BOUNDS_CHUNK)
+            .par_chunks(PARALLEL_CHUNK)
             .map(chunk_bounds)
             .reduce(
                 || None,
