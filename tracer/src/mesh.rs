@@ -765,6 +765,66 @@ mod tests {
         assert!(error.to_string().contains("triangle 1 uses vertex 4"));
     }
 
+    /// A strip of `triangles` triangles over `triangles + 2` vertices, with
+    /// coordinates that differ everywhere, so each chunk has its own box.
+    fn strip(triangles: u32) -> TriangleMesh {
+        TriangleMesh {
+            positions: (0..triangles + 2)
+                .map(|i| Vec3::new(i as f32, (i % 7) as f32 - 3.0, -((i % 13) as f32)))
+                .collect(),
+            triangles: (0..triangles).map(|t| [t, t + 1, t + 2]).collect(),
+            normals: None,
+            scalars: None,
+        }
+    }
+
+    #[test]
+    fn checks_and_bounds_across_parallel_chunks_are_the_serial_ones() {
+        // Three chunks and a partial fourth, on 1, 2 and 8 threads.
+        let triangles = 3 * PARALLEL_CHUNK as u32 + 17;
+        let mesh = strip(triangles);
+        let serial = mesh
+            .triangles
+            .iter()
+            .flatten()
+            .map(|&v| mesh.positions[v as usize])
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p), hi.max(p))
+            });
+        for threads in [1, 2, 8] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let bounds = mesh.validated_bounds().unwrap();
+                assert_eq!((bounds.min, bounds.max), serial, "{threads} threads");
+                // Two bad vertices and two bad triangles in different chunks:
+                // the first of each is the one named.
+                let mut bad = mesh.clone();
+                let (first, later) = (PARALLEL_CHUNK + 5, 2 * PARALLEL_CHUNK + 1);
+                bad.positions[later].x = f32::NAN;
+                bad.positions[first].z = f32::INFINITY;
+                assert!(matches!(
+                    bad.validate(),
+                    Err(MeshError::NonFiniteVertex { index, .. }) if index == first
+                ));
+                let mut bad = mesh.clone();
+                let vertex_count = bad.positions.len();
+                bad.triangles[later][0] = vertex_count as u32;
+                bad.triangles[first][2] = vertex_count as u32 + 9;
+                assert_eq!(
+                    bad.validate(),
+                    Err(MeshError::VertexIndexOutOfRange {
+                        triangle: first,
+                        vertex: vertex_count as u32 + 9,
+                        vertex_count,
+                    })
+                );
+            });
+        }
+    }
+
     #[test]
     fn attribute_lengths_must_match_vertices() {
         let mut mesh = one_triangle();
