@@ -405,6 +405,36 @@ impl Measurement {
             .sum()
     }
 
+    /// The frame's wall time outside the traversal (`map<intersect>` and
+    /// `map<occluded>`), in ns per pixel: what shading, compaction, scatters
+    /// and the display encoding cost whatever traces the rays. Each stage's
+    /// traversal time is its ops' share of the stage's op time (summed over
+    /// threads) times the stage's wall time, as the op split tables give it.
+    /// `None` where stages were not split op by op (the GPU).
+    pub fn beyond_traversal_ns_per_pixel(&self, pixels: u64) -> Option<f64> {
+        let is_traversal = |op: &OpTiming| {
+            op.label.ends_with("map<intersect>") || op.label.ends_with("map<occluded>")
+        };
+        let mut traversal_ms = 0.0;
+        let mut split = false;
+        for stage in &self.stages {
+            let total: f64 = stage
+                .ops
+                .iter()
+                .map(|op| op.thread_time.as_secs_f64())
+                .sum();
+            if total <= 0.0 {
+                continue;
+            }
+            split = true;
+            let traversal: f64 = (stage.ops.iter().filter(|op| is_traversal(op)))
+                .map(|op| op.thread_time.as_secs_f64())
+                .sum();
+            traversal_ms += stage.ms * traversal / total;
+        }
+        (split && pixels > 0).then(|| (self.mean_ms() - traversal_ms) * 1e6 / pixels as f64)
+    }
+
     /// The mean time of the stage that is `map<intersect>` alone.
     pub fn intersect_ms(&self) -> Option<f64> {
         self.stages
@@ -1219,6 +1249,46 @@ mod tests {
     use dpp_tracer::builtin_scene::DEFAULT_RESOLUTION;
     use dpp_tracer::volume::generate::Dataset;
     use glam::Vec3;
+
+    #[test]
+    fn the_cost_beyond_the_traversal_takes_each_stages_traversal_share() {
+        let op = |label: &str, ms: u64| OpTiming {
+            label: label.into(),
+            thread_time: Duration::from_millis(ms),
+        };
+        let stage = |ms: f64, ops: Vec<OpTiming>| StageTime {
+            stage: 0,
+            label: String::new(),
+            ms,
+            ops,
+        };
+        let measurement = |stages: Vec<StageTime>| Measurement {
+            frames_ms: vec![100.0, 140.0],
+            first_frame_ms: 200.0,
+            stages,
+            profiled_frames_ms: Vec::new(),
+        };
+        // A 60 ms stage whose ops took 30 + 90 thread-ms, three quarters of it
+        // in the traversal (45 ms of its wall time), and a 40 ms stage with
+        // none: 120 - 45 = 75 ms over 1000 pixels.
+        let traced = measurement(vec![
+            stage(
+                60.0,
+                vec![
+                    op("rays = map<cameraRay>", 10),
+                    op("hits = map<intersect>", 60),
+                    op("blocked = map<occluded>", 30),
+                    op("rgb = map<shader>", 20),
+                ],
+            ),
+            stage(40.0, vec![op("map<antiAlias>", 50)]),
+        ]);
+        let ns = traced.beyond_traversal_ns_per_pixel(1000).unwrap();
+        assert!((ns - 75e3).abs() < 1e-6, "{ns}");
+        // Stages never split op by op (the GPU's) give no figure.
+        let unsplit = measurement(vec![stage(60.0, Vec::new())]);
+        assert_eq!(unsplit.beyond_traversal_ns_per_pixel(1000), None);
+    }
 
     #[test]
     fn scene_specs() {

@@ -87,6 +87,12 @@ fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len().max(1) as f64
 }
 
+/// A table cell: [`Measurement::beyond_traversal_ns_per_pixel`], or `–`.
+fn beyond_traversal(measurement: &Measurement, pixels: u64) -> String {
+    (measurement.beyond_traversal_ns_per_pixel(pixels))
+        .map_or("–".into(), |ns| format!("{ns:.1}"))
+}
+
 impl Report {
     /// Which triangle test Embree's scene had, for the Embree sections.
     fn embree_test_words(&self) -> &'static str {
@@ -146,11 +152,11 @@ impl Report {
                 "the thread time inside the `map<occluded>` ops (occlusion and shadow rays, any hit)",
             )
         };
-        let _ = writeln!(md, "The fused WORKLOAD{workload} plan with Embree behind {calls}; everything else is the same. {test}. Ratio: Embree's time over dpp's. The last two columns, dpp / Embree single / Embree packet: the thread time (ms, summed over the threads) inside the `map<intersect>` ops (closest hit), and {last_words}.\n");
-        let _ = writeln!(md, "| scene | view | dpp | Embree single | Embree packet | single / dpp | packet / dpp | `intersect` thread ms | {last_heading} |");
+        let _ = writeln!(md, "The fused WORKLOAD{workload} plan with Embree behind {calls}; everything else is the same. {test}. Ratio: Embree's time over dpp's. The last three columns, dpp / Embree single / Embree packet: the thread time (ms, summed over the threads) inside the `map<intersect>` ops (closest hit), the frame's wall time outside the traversal in ns per pixel (as in the frames-per-second table), and {last_words}.\n");
+        let _ = writeln!(md, "| scene | view | dpp | Embree single | Embree packet | single / dpp | packet / dpp | `intersect` thread ms | beyond the traversal, ns/pixel | {last_heading} |");
         let _ = writeln!(
             md,
-            "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+            "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
         );
         for scene in &self.scenes {
             for view in &scene.views {
@@ -197,9 +203,14 @@ impl Report {
                 } else {
                     threads("occluded")
                 };
+                let beyond = [Some(&own.fused), single, packet]
+                    .iter()
+                    .map(|m| m.map_or("–".into(), |m| beyond_traversal(m, view.rays)))
+                    .collect::<Vec<String>>()
+                    .join(" / ");
                 let _ = writeln!(
                     md,
-                    "| {} | {} | {:.1} | {} | {} | {} | {} | {} | {} |",
+                    "| {} | {} | {:.1} | {} | {} | {} | {} | {} | {} | {} |",
                     scene.name,
                     view.view,
                     own.fused.mean_ms(),
@@ -208,6 +219,7 @@ impl Report {
                     ratio(single),
                     ratio(packet),
                     threads("intersect"),
+                    beyond,
                     last,
                 );
             }
@@ -530,11 +542,11 @@ impl Report {
 
         if self.has_workload(2) || self.has_workload(3) {
             let _ = writeln!(md, "## WORKLOAD2 and WORKLOAD3, frames per second\n");
-            let _ = writeln!(md, "Last column: the fused frame over WORKLOAD1's `map<intersect>` time on the same rays (when WORKLOAD1 ran too).\n");
-            let _ = writeln!(md, "| scene | view | workload | fused fps | unfused fps | fused ms | unfused ms | fusion gain | fused / W1 intersect |");
+            let _ = writeln!(md, "Beyond the traversal: the fused frame's wall time outside `map<intersect>` and `map<occluded>` (each stage's share of them, from its op split), in ns per pixel (CPU only). Last column: the fused frame over WORKLOAD1's `map<intersect>` time on the same rays (when WORKLOAD1 ran too).\n");
+            let _ = writeln!(md, "| scene | view | workload | fused fps | unfused fps | fused ms | unfused ms | fusion gain | beyond the traversal, ns/pixel | fused / W1 intersect |");
             let _ = writeln!(
                 md,
-                "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"
+                "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
             );
             for scene in &self.scenes {
                 for view in &scene.views {
@@ -545,7 +557,7 @@ impl Report {
                             .unwrap_or_else(|| "–".into());
                         let _ = writeln!(
                             md,
-                            "| {} | {} | WORKLOAD{} | {:.3} | {:.3} | {:.1} | {:.1} | {:.2}× | {} |",
+                            "| {} | {} | WORKLOAD{} | {:.3} | {:.3} | {:.1} | {:.1} | {:.2}× | {} | {} |",
                             scene.name,
                             view.view,
                             w.workload,
@@ -554,6 +566,7 @@ impl Report {
                             w.fused.mean_ms(),
                             w.unfused.mean_ms(),
                             w.fusion_gain(),
+                            beyond_traversal(&w.fused, view.rays),
                             over_intersect
                         );
                     }
@@ -691,6 +704,7 @@ impl Report {
                                 "fused_over_workload1_intersect": own
                                     .filter(|_| w.workload != 1)
                                     .map(|own| w.fused.mean_ms() / own),
+                                "beyond_traversal_ns_per_pixel": w.fused.beyond_traversal_ns_per_pixel(view.rays),
                             })).collect::<Vec<_>>(),
                             "engines": view.engines.iter().map(|e| {
                                 let rate = e.unfused.intersect_ms().map(|t| mrays(view.rays, t));
@@ -731,6 +745,7 @@ impl Report {
                                     "engine_over_dpp": own.map(|w| e.fused.mean_ms() / w.fused.mean_ms()),
                                     "intersect_thread_ms": e.fused.map_thread_ms("intersect"),
                                     "occluded_thread_ms": e.fused.map_thread_ms("occluded"),
+                                    "beyond_traversal_ns_per_pixel": e.fused.beyond_traversal_ns_per_pixel(view.rays),
                                     "fused_over_workload1_intersect": over_intersect,
                                 })
                             }).collect::<Vec<_>>(),

@@ -149,6 +149,13 @@ fn a_tiny_bench_writes_tables_json_and_a_chart() {
         let row = format!("| builtin:16 | front | WORKLOAD{} |", w["workload"]);
         let line = markdown.lines().find(|l| l.starts_with(&row)).unwrap();
         assert!(line.ends_with(&cell), "{line} should end with {cell}");
+        // What the frame costs outside the traversal, per pixel: part of
+        // the frame, and the cell before the last.
+        let beyond = w["beyond_traversal_ns_per_pixel"].as_f64().unwrap();
+        let frame_ns_per_pixel = fused_ms * 1e6 / 1536.0;
+        assert!(beyond > 0.0 && beyond < frame_ns_per_pixel, "{w}");
+        let cells: Vec<&str> = line.split(" | ").collect();
+        assert_eq!(cells[cells.len() - 2], format!("{beyond:.1}"), "{line}");
     }
     assert!(w1["unfused"]["intersect_mrays_per_s"].as_f64().unwrap() > 0.0);
     assert!(w1["fused"]["frame_mrays_per_s"].as_f64().unwrap() > 0.0);
@@ -413,6 +420,8 @@ fn an_embree_bench_compares_every_workload() {
         assert!(engine["engine_over_dpp"].as_f64().unwrap() > 0.0);
         assert!(engine["intersect_thread_ms"].as_f64().unwrap() > 0.0);
         assert!(engine["fused_over_workload1_intersect"].as_f64().unwrap() > 0.0);
+        // Outside the traversal, Embree's frame is still dpp's plan.
+        assert!(engine["beyond_traversal_ns_per_pixel"].as_f64().unwrap() > 0.0);
         // Only WORKLOAD3 traces any-hit rays.
         let occluded = engine["occluded_thread_ms"].as_f64().unwrap();
         assert_eq!(occluded > 0.0, engine["workload"] == 3, "{engine}");
