@@ -396,11 +396,10 @@ impl Measurement {
     /// The thread time (ms, summed over threads and stages) of the ops that
     /// call `functor` in a map (CPU profiles).
     pub fn map_thread_ms(&self, functor: &str) -> f64 {
-        let call = format!("map<{functor}>");
         self.stages
             .iter()
             .flat_map(|s| &s.ops)
-            .filter(|op| op.label.ends_with(&call))
+            .filter(|op| maps(op, functor))
             .map(|op| ms(op.thread_time))
             .sum()
     }
@@ -412,9 +411,7 @@ impl Measurement {
     /// threads) times the stage's wall time, as the op split tables give it.
     /// `None` where stages were not split op by op (the GPU).
     pub fn beyond_traversal_ns_per_pixel(&self, pixels: u64) -> Option<f64> {
-        let is_traversal = |op: &OpTiming| {
-            op.label.ends_with("map<intersect>") || op.label.ends_with("map<occluded>")
-        };
+        let is_traversal = |op: &OpTiming| maps(op, "intersect") || maps(op, "occluded");
         let mut traversal_ms = 0.0;
         let mut split = false;
         for stage in &self.stages {
@@ -442,6 +439,14 @@ impl Measurement {
             .find(|s| s.label == "map<intersect>")
             .map(|s| s.ms)
     }
+}
+
+/// Whether a profiled op is a `map` of `functor` (`hits = map<intersect>`).
+fn maps(op: &OpTiming, functor: &str) -> bool {
+    op.label
+        .strip_suffix('>')
+        .and_then(|label| label.strip_suffix(functor))
+        .is_some_and(|label| label.ends_with("map<"))
 }
 
 /// A workload on one view: fused and unfused.
