@@ -97,6 +97,7 @@ pub fn run_functor_gpu(
         reads_uniform: Vec::new(),
         materialises: vec![output],
         barrier: Barrier::ControlFlow,
+        inner: None,
     };
     let plan = Plan {
         pipeline: format!("run {name}"),

@@ -127,7 +127,15 @@ impl Generator<'_, '_, '_> {
     ) -> Result<Vec<(VarId, SinkWork)>, RunError> {
         let call = self.call;
         let mut sinks = Vec::new();
+        // A nested stage's inner ops become the body of the function its
+        // closing group gather reads them through, at the inner index (its
+        // `i`); the kernel's own body waits here meanwhile.
+        let inner_ops = call.stage.inner.as_ref().map_or(0, |inner| inner.ops);
+        let mut kernel_body = None;
         for (position, (op, values)) in call.stage.ops.iter().zip(&call.host_values).enumerate() {
+            if position == 0 && inner_ops > 0 {
+                kernel_body = Some(std::mem::take(&mut self.builder.body));
+            }
             match &op.kind {
                 OpKind::Iota { .. } => self.bind(op.outputs[0], "i".into()),
                 OpKind::Fill { .. } => {
@@ -198,6 +206,20 @@ impl Generator<'_, '_, '_> {
                     let (function, _) = self.twin(position, op, slots)?;
                     let ty = elem_type_wgsl(call.elem_type(op.inputs[0]), call.records);
                     match self.lookup(slots, op.inputs[0])? {
+                        Value::Local(value) if position == inner_ops && inner_ops > 0 => {
+                            let kernel_body = kernel_body.take().unwrap_or_default();
+                            let inner_body = std::mem::replace(&mut self.builder.body, kernel_body);
+                            let _ = writeln!(
+                                self.builder.functions,
+                                "fn {function}_src(i: u32) -> {ty} {{\n{inner_body}    return {value};\n}}"
+                            );
+                            for output in call.stage.ops[..inner_ops]
+                                .iter()
+                                .flat_map(|op| &op.outputs)
+                            {
+                                self.locals.remove(output);
+                            }
+                        }
                         Value::Whole(source) => {
                             let loader = self.builder.array_loader(&source);
                             let _ = writeln!(

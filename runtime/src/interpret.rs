@@ -229,6 +229,15 @@ impl<A> Slots<A> {
     }
 }
 
+impl StageCall<'_> {
+    /// For a nested stage, the number of its inner ops and the size of the
+    /// groups the gather after them closes (docs/language.md §6, rule 5).
+    pub fn inner_level(&self) -> Option<(usize, usize)> {
+        let inner = self.stage.inner.as_ref()?;
+        Some((inner.ops, self.host_values[inner.ops].group))
+    }
+}
+
 /// One stage, ready to run: its host values and length already known.
 pub struct StageCall<'a> {
     pub plan: &'a Plan,
@@ -833,9 +842,9 @@ impl<'a, B: Backend> Interpreter<'a, B> {
             });
         }
 
-        // The head op decides how many elements the stage runs over.
+        // The head op decides how many elements the stage (or its inner level) runs over.
         let k = host_values[0].group;
-        let len = match &head.kind {
+        let head_len = match &head.kind {
             OpKind::Iota { count } | OpKind::Fill { count, .. } => {
                 self.eval_count(count, "the length")?
             }
@@ -859,11 +868,25 @@ impl<'a, B: Backend> Interpreter<'a, B> {
             }
             _ => self.array_len(head.inputs[0])?,
         };
-        for &v in &stage.reads_direct {
+        // A nested stage runs over the groups its inner level's closing gather makes.
+        let len = match &stage.inner {
+            Some(inner) => {
+                let k = host_values[inner.ops].group;
+                if head_len % k != 0 {
+                    return Err(RunError::bad_input(format!("group gather of {head_len} elements in groups of {k}: {head_len} is not a multiple of {k}")));
+                }
+                head_len / k
+            }
+            None => head_len,
+        };
+        let inner_reads = stage.inner.iter().flat_map(|inner| &inner.reads_direct);
+        let level_reads =
+            (stage.reads_direct.iter().map(|v| (v, len))).chain(inner_reads.map(|v| (v, head_len)));
+        for (&v, level_len) in level_reads {
             let found = self.array_len(v)?;
-            if found != len {
+            if found != level_len {
                 return Err(RunError::bad_input(format!(
-                    "length mismatch: `{}` has {found} elements, but the stage runs over {len}",
+                    "length mismatch: `{}` has {found} elements, but the stage runs over {level_len}",
                     self.plan.var(v).name
                 )));
             }

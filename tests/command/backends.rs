@@ -79,6 +79,12 @@ fn comparison(name: &str) -> Option<Comparison> {
             prim: false,
             exact: vec!["counts"],
         },
+        "examples.sample_counts" => Comparison {
+            args: vec!["--out".into(), "counts=counts.npy".into()],
+            image: false,
+            prim: false,
+            exact: vec!["counts"],
+        },
         "examples.compaction" => Comparison {
             args: vec!["--out".into(), "kept=kept.npy".into()],
             image: false,

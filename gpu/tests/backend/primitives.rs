@@ -54,6 +54,13 @@ pipeline primitives {
     out added       = map<add>(a, b)
     out gathered    = gather(idx, src)
     out groupSums   = gather<sum>(grouped, group: k)
+    // Nested stages (docs/language.md §6, rule 5): pair `j` of element
+    // `j / k`, its terms summed per element in the stage that makes them,
+    // read at the inner index (`grouped`) and through an index (`a`); and a
+    // fan-out's copies, each with its lane, folded the same way.
+    pair        = iota(n * k)
+    out pairSums    = gather<sum>(map<mul>(gather(pair / k, a), grouped), group: k)
+    out laneSums    = gather<sum>(map<add>(scatter<lane>(b, fanout: k), scatter<repeat>(b, fanout: k)), group: k)
     out permuted    = scatter(perm, a, len: n)
     out masked      = scatter(perm, a, mask: keep, len: n)
     out overwritten = scatter(idx, a, into: dst)
@@ -554,6 +561,17 @@ fn check_against_reference(case: &Case, outputs: &HashMap<String, OutputValue>) 
         .map(|g| g.iter().fold(0u32, |s, x| s.wrapping_add(*x)))
         .collect();
     assert_eq!(u32s(outputs, "groupSums"), group_sums);
+    let pair_sums: Vec<u32> = (a.iter().zip(grouped.chunks(*k)))
+        .map(|(x, g)| {
+            g.iter()
+                .fold(0u32, |s, y| s.wrapping_add(x.wrapping_mul(*y)))
+        })
+        .collect();
+    assert_eq!(u32s(outputs, "pairSums"), pair_sums);
+    let lane_sums: Vec<u32> = (b.iter())
+        .map(|x| (0..*k as u32).fold(0u32, |s, j| s.wrapping_add(x.wrapping_add(j))))
+        .collect();
+    assert_eq!(u32s(outputs, "laneSums"), lane_sums);
     let mut permuted = vec![0u32; *n];
     let mut masked = vec![0u32; *n];
     for i in 0..*n {
@@ -639,6 +657,18 @@ proptest! {
         prop_assert_eq!(&fused_one_thread, &run(&case, true, 2, 64));
         prop_assert_eq!(&fused_one_thread, &run(&case, false, 2, 64));
     }
+}
+
+/// The pairs' and the copies' sums above run in nested stages, so the
+/// tests of every primitive cover them on both backends.
+#[test]
+fn the_pair_and_lane_sums_run_in_nested_stages() {
+    let plan = compile_case(&fixed_case(7), &library(), true);
+    let closed: Vec<&str> = (plan.stages().iter())
+        .filter_map(|stage| stage.closing_group_gather())
+        .map(|op| plan.var(op.outputs[0]).name.as_str())
+        .collect();
+    assert_eq!(closed, ["pairSums", "laneSums"]);
 }
 
 #[test]

@@ -3,7 +3,9 @@
 //! map → map (rule 1), a gather's indexed read moves into its consumer
 //! (rule 2), and a map runs inside the scatter, reduce, scan or sort that
 //! consumes it (rule 3). Stages end at the barriers of rule 4. An intermediate that
-//! nothing outside its stage reads is never materialised.
+//! nothing outside its stage reads is never materialised. A group gather
+//! whose groups are made by the open stage, and read by nothing else, closes
+//! an inner level of it (rule 5): the stage goes on over the groups.
 //!
 //! A scatter is not a barrier (rule 4 does not list it): ops after it go on
 //! in its stage, so one stage can end in several scatters (a tracer's
@@ -84,6 +86,9 @@ struct StageFormer<'a> {
 struct OpenStage {
     ops: Vec<Op>,
     index_space: Option<HostExpr>,
+    /// Once a group gather has closed an inner level (rule 5): the number of
+    /// ops before it and their index space.
+    inner: Option<(usize, Option<HostExpr>)>,
     /// Variables written by the stage's ops.
     locals: HashSet<VarId>,
     /// Results of the stage's scatters, complete only when the stage ends.
@@ -161,6 +166,20 @@ impl StageFormer<'_> {
                     }
                 }
                 Node::Op(mut op) => {
+                    // A group gather that closes an inner level turns the stage
+                    // that makes its input into a nested one, over the groups.
+                    if let Some(stage) = open.as_mut().filter(|stage| self.closes_level(stage, &op))
+                    {
+                        // The side stage runs before the open one anyway.
+                        if let Some(side) = side.take() {
+                            out.extend(self.close(side, Barrier::LengthChange));
+                        }
+                        self.open_level(stage, &op);
+                    } else if let Some(stage) =
+                        side.as_mut().filter(|stage| self.closes_level(stage, &op))
+                    {
+                        self.open_level(stage, &op);
+                    }
                     let joins_open = open.as_ref().map(|stage| self.joins(stage, &op));
                     let independent = open
                         .as_ref()
@@ -209,6 +228,7 @@ impl StageFormer<'_> {
                     let target = if into_side { &mut side } else { &mut open };
                     let stage = target.get_or_insert_with(|| OpenStage {
                         index_space: self.index_space(&op),
+                        inner: None,
                         ops: Vec::new(),
                         locals: HashSet::new(),
                         scattered: HashSet::new(),
@@ -422,8 +442,10 @@ impl StageFormer<'_> {
         if !self.fuse {
             return Err(Barrier::Unfused);
         }
+        let closes_inner = stage.inner.as_ref().map(|(ops, _)| *ops) == Some(stage.ops.len());
         if matches!(op.kind, OpKind::GroupGather { .. } | OpKind::Expand { .. })
             && !is_elementwise_group(op)
+            && !closes_inner
         {
             return Err(Barrier::LengthChange);
         }
@@ -467,6 +489,66 @@ impl StageFormer<'_> {
         Ok(())
     }
 
+    /// Whether the group gather `op` closes an inner level of `stage` (rule
+    /// 5): it sums (or otherwise folds) groups of a value `stage` makes, and
+    /// nothing but `op` and the stage's own ops reads any value the stage
+    /// makes, so the stage may run a group's elements inside `op`'s element.
+    fn closes_level(&self, stage: &OpenStage, op: &Op) -> bool {
+        let OpKind::GroupGather { group } = &op.kind else {
+            return false;
+        };
+        if !self.fuse
+            || is_elementwise_group(op)
+            || stage.inner.is_some()
+            || stage.index_space.is_none()
+            || self.index_space(op).is_none()
+            || !stage.locals.contains(&op.inputs[0])
+            || !stage.outputs.is_empty()
+            || stage.ops.iter().any(Op::is_sink)
+        {
+            return false;
+        }
+        // A chunk of the stage's elements holds whole groups of the inner
+        // level; a fan-out at its head must then hand out groups of the same size.
+        if let OpKind::Expand { fanout } = &stage.ops[0].kind {
+            if self.canonical(fanout.clone()) != self.canonical(group.clone()) {
+                return false;
+            }
+        }
+        let mut reads_in_stage = self.reads_in(stage.ops.iter().chain([op]));
+        reads_in_stage.resize(self.vars.len(), 0);
+        stage.locals.iter().all(|&v| {
+            let i = v.0 as usize;
+            self.usage.definitions[i] == 1
+                && !self.usage.outputs.contains(&v)
+                && self.usage.reads[i] == reads_in_stage[i]
+        })
+    }
+
+    /// `stage`'s ops so far become its inner level, and the stage runs over
+    /// the groups the group gather `op` closes.
+    fn open_level(&self, stage: &mut OpenStage, op: &Op) {
+        stage.inner = Some((stage.ops.len(), stage.index_space.take()));
+        stage.index_space = self.index_space(op);
+    }
+
+    /// For each variable, the number of `ops` that read it.
+    fn reads_in<'o>(&self, ops: impl Iterator<Item = &'o Op>) -> Vec<u32> {
+        let mut reads = vec![0u32; self.vars.len()];
+        for op in ops {
+            let mut distinct = op.array_reads();
+            for e in op.host_exprs() {
+                e.visit_vars(&mut |v| distinct.push(v));
+            }
+            distinct.sort();
+            distinct.dedup();
+            for v in distinct {
+                reads[v.0 as usize] += 1;
+            }
+        }
+        reads
+    }
+
     /// Whether `op` cannot join `stage` because it runs over another length, and
     /// may run before the whole stage: it reads nothing the stage writes and
     /// writes nothing the stage reads or writes.
@@ -491,26 +573,19 @@ impl StageFormer<'_> {
     /// The finished stage, then views of record fields it computed that later
     /// nodes read (the record itself is materialised instead of the field).
     fn close(&self, stage: OpenStage, barrier: Barrier) -> Vec<Node> {
-        let mut reads_in_stage = vec![0u32; self.vars.len()];
-        for op in &stage.ops {
-            let mut distinct = op.array_reads();
-            for e in op.host_exprs() {
-                e.visit_vars(&mut |v| distinct.push(v));
-            }
-            distinct.sort();
-            distinct.dedup();
-            for v in distinct {
-                reads_in_stage[v.0 as usize] += 1;
-            }
-        }
+        let reads_in_stage = self.reads_in(stage.ops.iter());
+        let inner_ops = stage.inner.as_ref().map_or(0, |(ops, _)| *ops);
         let mut materialises = Vec::new();
+        let mut inner_reads_direct = Vec::new();
         let mut reads_direct = Vec::new();
         let mut reads_indexed = Vec::new();
         let mut reads_uniform = Vec::new();
         let mut written: HashSet<VarId> = HashSet::new();
         let mut views = Vec::new();
-        for op in &stage.ops {
+        for (position, op) in stage.ops.iter().enumerate() {
             let (direct, indexed): (Vec<VarId>, Vec<VarId>) = match &op.kind {
+                // The closing gather of an inner level reads the level's own values.
+                _ if stage.inner.is_some() && position == inner_ops => (Vec::new(), Vec::new()),
                 OpKind::Gather => (vec![op.inputs[0]], vec![op.inputs[1]]),
                 _ if is_elementwise_group(op) => (op.inputs.clone(), Vec::new()),
                 OpKind::GroupGather { .. } | OpKind::Expand { .. } => {
@@ -532,9 +607,14 @@ impl StageFormer<'_> {
                 }
                 _ => (op.inputs.clone(), Vec::new()),
             };
+            let level_reads_direct = if position < inner_ops {
+                &mut inner_reads_direct
+            } else {
+                &mut reads_direct
+            };
             for v in direct {
-                if !written.contains(&v) && !reads_direct.contains(&v) {
-                    reads_direct.push(v);
+                if !written.contains(&v) && !level_reads_direct.contains(&v) {
+                    level_reads_direct.push(v);
                 }
             }
             for v in indexed {
@@ -584,6 +664,11 @@ impl StageFormer<'_> {
             reads_uniform,
             materialises,
             barrier,
+            inner: stage.inner.map(|(ops, index_space)| InnerLevel {
+                ops,
+                index_space,
+                reads_direct: inner_reads_direct,
+            }),
         })];
         nodes.extend(views);
         nodes.extend(stage.outputs);

@@ -429,9 +429,39 @@ pub struct Stage {
     /// Variables the stage writes in full; every other output stays inside the stage.
     pub materialises: Vec<VarId>,
     pub barrier: Barrier,
+    /// The stage's first ops when they run over groups of its elements
+    /// (docs/language.md §6, rule 5): `None` for a stage of one level.
+    pub inner: Option<InnerLevel>,
+}
+
+/// The inner level of a nested stage: its first `ops` ops run over
+/// `index_space` elements, `k` for each of the stage's own, and the group
+/// gather that follows them (its input the last of them) closes the level,
+/// giving one value per element of the stage. No value of the inner level is
+/// materialised or read by any node but the stage's own inner ops and that
+/// group gather, so a backend may compute a group's inner values one element
+/// of the stage at a time.
+#[derive(Clone, Debug, Serialize)]
+pub struct InnerLevel {
+    pub ops: usize,
+    pub index_space: Option<HostExpr>,
+    /// Arrays the inner ops read element by element, at the inner index.
+    pub reads_direct: Vec<VarId>,
 }
 
 impl Stage {
+    /// The group gather that closes the inner level, if the stage has one.
+    pub fn closing_group_gather(&self) -> Option<&Op> {
+        self.inner.as_ref().map(|inner| &self.ops[inner.ops])
+    }
+
+    /// Whether the op at `position` runs at the inner level.
+    pub fn is_inner(&self, position: usize) -> bool {
+        self.inner
+            .as_ref()
+            .is_some_and(|inner| position < inner.ops)
+    }
+
     /// The stage's ops in order: `iota → map<cameraRay> → map<intersect>`.
     pub fn label(&self) -> String {
         self.ops

@@ -228,7 +228,23 @@ impl Printer<'_> {
             .as_ref()
             .map_or("?".to_string(), |e| host_text(e, self.plan));
         self.line(depth + 1, &format!("over {over}"));
-        for op in &stage.ops {
+        // A nested stage's inner ops, a group of them for each element.
+        let inner_ops = stage.inner.as_ref().map_or(0, |inner| inner.ops);
+        if let Some(inner) = &stage.inner {
+            let over = inner
+                .index_space
+                .as_ref()
+                .map_or("?".to_string(), |e| host_text(e, self.plan));
+            self.line(depth + 1, &format!("inner level over {over} {{"));
+            for op in &stage.ops[..inner.ops] {
+                let line = self.op(op);
+                self.line(depth + 2, &line);
+            }
+            let direct = self.names(&inner.reads_direct);
+            self.line(depth + 2, &format!("reads direct: {direct}"));
+            self.line(depth + 1, "}");
+        }
+        for op in &stage.ops[inner_ops..] {
             let line = self.op(op);
             self.line(depth + 1, &line);
         }

@@ -249,6 +249,57 @@ impl Validator<'_> {
                 ));
             }
         }
+        if let Some(inner) = &stage.inner {
+            self.inner_level(stage, inner);
+        }
+    }
+
+    /// A nested stage's inner values stay inside it: no sink among its inner
+    /// ops, none of their values materialised, and only the closing group
+    /// gather reads one from the outer level.
+    fn inner_level(&mut self, stage: &Stage, inner: &InnerLevel) {
+        let label = stage.label();
+        let Some(closing) = stage.ops.get(inner.ops) else {
+            self.problem(format!(
+                "stage `{label}` has no op to close its inner level"
+            ));
+            return;
+        };
+        let inner_values: HashSet<VarId> = stage.ops[..inner.ops]
+            .iter()
+            .flat_map(|op| op.outputs.iter().copied())
+            .collect();
+        if !matches!(closing.kind, OpKind::GroupGather { .. })
+            || !inner_values.contains(&closing.inputs[0])
+        {
+            self.problem(format!(
+                "stage `{label}`: {} does not gather groups of its inner level",
+                closing.label()
+            ));
+        }
+        if let Some(sink) = stage.ops[..inner.ops].iter().find(|op| op.is_sink()) {
+            self.problem(format!(
+                "stage `{label}`: {} is a sink inside an inner level",
+                sink.label()
+            ));
+        }
+        for &var in &stage.materialises {
+            if inner_values.contains(&var) {
+                let name = self.name(var);
+                self.problem(format!(
+                    "stage `{label}` materialises {name}, a value of its inner level"
+                ));
+            }
+        }
+        for op in &stage.ops[inner.ops + 1..] {
+            if let Some(&var) = op.reads().iter().find(|v| inner_values.contains(v)) {
+                let name = self.name(var);
+                self.problem(format!(
+                    "stage `{label}`: {} reads {name}, a value of its inner level",
+                    op.label()
+                ));
+            }
+        }
     }
 }
 

@@ -187,11 +187,13 @@ impl StageRun<'_, '_> {
         let host_values = &self.call.host_values;
         let len = self.call.len;
         let k = host_values[0].group;
-        // Chunks hold whole groups of a fan-out so each source element is in one chunk.
-        let chunk = match head.kind {
-            OpKind::Expand { .. } => (self.context.chunk / k).max(1) * k,
-            OpKind::GroupGather { .. } => (self.context.chunk / k).max(1),
-            _ => self.context.chunk,
+        // Chunks hold whole groups of a fan-out so each source element is in
+        // one chunk; a nested stage's chunk holds a chunk of inner elements.
+        let chunk = match (self.call.inner_level(), &head.kind) {
+            (Some((_, group)), _) => (self.context.chunk / group).max(1),
+            (None, OpKind::GroupGather { .. }) => (self.context.chunk / k).max(1),
+            (None, OpKind::Expand { .. }) => (self.context.chunk / k).max(1) * k,
+            (None, _) => self.context.chunk,
         };
 
         self.release_rebound_outputs();
@@ -576,6 +578,12 @@ impl StageRun<'_, '_> {
         range: Range<usize>,
     ) -> Result<ChunkResult, RunError> {
         let records = &self.context.library.records;
+        // A nested stage's inner ops run over the chunk's groups' elements.
+        let (inner_ops, inner_range) = match self.call.inner_level() {
+            Some((ops, k)) => (ops, range.start * k..range.end * k),
+            None => (0, range.clone()),
+        };
+        let stage_range = range;
         let mut locals: Vec<(VarId, ChunkValue)> = Vec::new();
         // A value written earlier in the stage shadows the array of the same slot.
         let lookup =
@@ -604,6 +612,11 @@ impl StageRun<'_, '_> {
             if number < computed_until {
                 continue;
             }
+            let range = if number < inner_ops {
+                inner_range.clone()
+            } else {
+                stage_range.clone()
+            };
             if let Some(Some(prepared)) = segments.get(number) {
                 let segment = &prepared.segment;
                 let inputs: Vec<ChunkValue> = segment
@@ -804,6 +817,7 @@ impl StageRun<'_, '_> {
         if let Some(last) = op_times.last_mut() {
             *last = op_start.elapsed();
         }
+        let range = stage_range;
         if !materialised.is_empty() {
             let store_start = Instant::now();
             for (var, target) in materialised {

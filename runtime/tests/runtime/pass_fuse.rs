@@ -5,6 +5,7 @@
 //! 2. `gather(idx, src) → map`: the indexed read moves into the consumer.
 //! 3. `map → scatter`, `map → reduce`, `map → scan`, `map → sort` run in one stage.
 //! 4. Barriers: scan, sort, reduce, a length change, a loop or branch boundary.
+//! 5. A group gather of values only its stage reads closes that stage's inner level.
 //!
 //! `check!(source, @"…")` shows the fused plan's text. It also checks that the
 //! unfused plan (`--no-fuse`) has one op per stage and the same ops, and RUNS
@@ -427,6 +428,7 @@ fn rule4_fan_out_and_group_gather_change_the_length() {
     // A stage ends before each length change; the op that changes it heads
     // the next stage, where maps over the new length join it. The sums of
     // `n * k` elements in groups of `k` run over `n`: `h` reads `x` there.
+    // (`e` is an output too, so the group gather cannot close a level.)
     check!(
         r#"
         param n = 4
@@ -436,6 +438,7 @@ fn rule4_fan_out_and_group_gather_change_the_length() {
             e = scatter<repeat>(x, fanout: k) → map<add>(fill(n * k, 0.5))
             g = gather<sum>(e, group: k)
             out h = map<mul>(g, x)
+            out e
         }
         "#,
         @"
@@ -461,6 +464,7 @@ fn rule4_fan_out_and_group_gather_change_the_length() {
       materialises e: f32
       ends at length change
     }
+    out e = e
     stage 3 [gather<sum> → map<mul>] {
       over n
       g = gather<sum>(e, group: k)
@@ -472,6 +476,237 @@ fn rule4_fan_out_and_group_gather_change_the_length() {
     out h = h
     ---
     h = [0.0, 4.5, 15.0, 31.5]
+    e = [0.5, 0.5, 0.5, 1.5, 1.5, 1.5, 2.5, 2.5, 2.5, 3.5, 3.5, 3.5]
+    "
+    );
+}
+
+#[test]
+fn rule5_a_group_gather_closes_the_inner_level_of_its_elements() {
+    // `e` is read only by the group gather: the fan-out, its maps and the
+    // sums share one stage over `n`, whose inner level runs over `n * k`.
+    check!(
+        r#"
+        param n = 4
+        param k = 3
+        pipeline p {
+            x = iota(n) → map<toF32>
+            e = scatter<repeat>(x, fanout: k) → map<add>(fill(n * k, 0.5))
+            g = gather<sum>(e, group: k)
+            out h = map<mul>(g, x)
+        }
+        "#,
+        @"
+    pipeline p (fused, 2 stages)
+    param n: int = 4
+    param k: int = 3
+    let n: int = 4
+    let k: int = 3
+    stage 1 [iota → map<toF32>] {
+      over n
+      %2 = iota(n)
+      x = map<toF32>(%2)
+      reads direct: -; indexed: -; uniform: n
+      materialises x: f32
+      ends at length change
+    }
+    stage 2 [scatter<repeat> → fill → map<add> → gather<sum> → map<mul>] {
+      over n
+      inner level over n * k {
+        %5 = scatter<repeat>(x, fanout: k)
+        %6 = fill(n * k, 0.5)
+        e = map<add>(%5, %6)
+        reads direct: -
+      }
+      g = gather<sum>(e, group: k)
+      h = map<mul>(g, x)
+      reads direct: x: f32; indexed: x: f32; uniform: k, n
+      materialises h: f32
+      ends at control flow
+    }
+    out h = h
+    ---
+    h = [0.0, 4.5, 15.0, 31.5]
+    "
+    );
+}
+
+#[test]
+fn rule5_pairs_of_points_and_lights_summed_per_point() {
+    // The idiom of the written-out shading: pair `j` is point `j / k` with
+    // light `j % k`; the pairs' terms are summed per point in the stage
+    // that makes them, and the points' work goes on in it.
+    check!(
+        r#"
+        param n = 5
+        param k = 2
+        pipeline p {
+            points = iota(n) → map<toF32>
+            lights = iota(k) → map<toF32> → map<add>(fill(k, 1.0))
+            pair = iota(n * k)
+            term = map<mul>(gather(pair / k, points), gather(pair % k, lights))
+            lit = gather<sum>(term, group: k)
+            out shaded = map<add>(lit, fill(n, 0.25))
+        }
+        "#,
+        @"
+    pipeline p (fused, 3 stages)
+    param n: int = 5
+    param k: int = 2
+    let n: int = 5
+    let k: int = 2
+    stage 1 [iota → map<toF32> → fill → map<add>] {
+      over k
+      %5 = iota(k)
+      %6 = map<toF32>(%5)
+      %7 = fill(k, 1.0)
+      lights = map<add>(%6, %7)
+      reads direct: -; indexed: -; uniform: k
+      materialises lights: f32
+      ends at length change
+    }
+    stage 2 [iota → map<toF32>] {
+      over n
+      %2 = iota(n)
+      points = map<toF32>(%2)
+      reads direct: -; indexed: -; uniform: n
+      materialises points: f32
+      ends at length change
+    }
+    stage 3 [iota → fill → map<div> → gather → map<rem> → gather → map<mul> → gather<sum> → fill → map<add>] {
+      over n
+      inner level over n * k {
+        pair = iota(n * k)
+        %23 = fill(n * k, k)
+        %12 = map<div>(pair, %23)
+        %13 = gather(%12, points)
+        %14 = map<rem>(pair, %23)
+        %15 = gather(%14, lights)
+        term = map<mul>(%13, %15)
+        reads direct: -
+      }
+      lit = gather<sum>(term, group: k)
+      %20 = fill(n, 0.25)
+      shaded = map<add>(lit, %20)
+      reads direct: -; indexed: points: f32, lights: f32; uniform: n, k
+      materialises shaded: f32
+      ends at control flow
+    }
+    out shaded = shaded
+    ---
+    shaded = [0.25, 3.25, 6.25, 9.25, 12.25]
+    "
+    );
+}
+
+#[test]
+fn rule5_no_level_when_an_inner_value_is_read_after_the_sums() {
+    // `t` is read by the last map too: it is stored, and the sums start a stage.
+    check!(
+        r#"
+        param n = 3
+        param k = 2
+        pipeline p {
+            t = iota(n * k) → map<toF32>
+            s = gather<sum>(t, group: k)
+            out r = map<add>(s, gather(iota(n), t))
+        }
+        "#,
+        @"
+    pipeline p (fused, 2 stages)
+    param n: int = 3
+    param k: int = 2
+    let n: int = 3
+    let k: int = 2
+    stage 1 [iota → map<toF32>] {
+      over n * k
+      %2 = iota(n * k)
+      t = map<toF32>(%2)
+      reads direct: -; indexed: -; uniform: n, k
+      materialises t: f32
+      ends at length change
+    }
+    stage 2 [gather<sum> → iota → gather → map<add>] {
+      over n
+      s = gather<sum>(t, group: k)
+      %7 = iota(n)
+      %8 = gather(%7, t)
+      r = map<add>(s, %8)
+      reads direct: -; indexed: t: f32; uniform: k, n
+      materialises r: f32
+      ends at control flow
+    }
+    out r = r
+    ---
+    r = [1.0, 6.0, 11.0]
+    "
+    );
+}
+
+#[test]
+fn rule5_no_level_under_a_scatter_or_a_fan_out_of_another_size() {
+    // A scatter's target is complete only at its stage's end, so a stage
+    // with one has no inner level; nor does a fan-out by 2 summed in
+    // groups of 4 (a chunk of the sums would split a point's copies).
+    check!(
+        r#"
+        param n = 4
+        pipeline p {
+            t = iota(n * 2) → map<toF32>
+            hist = scatter(iota(n * 2), t, len: n * 2)
+            s = gather<sum>(t, group: 2)
+            e = scatter<repeat>(iota(n) → map<toF32>, fanout: 2) → map<add>(fill(n * 2, 1.0))
+            q = gather<sum>(e, group: 4)
+            out s
+            out q
+            out hist
+        }
+        "#,
+        @"
+    pipeline p (fused, 4 stages)
+    param n: int = 4
+    let n: int = 4
+    stage 1 [iota → map<toF32> → scatter] {
+      over n * 2
+      %1 = iota(n * 2)
+      t = map<toF32>(%1)
+      hist = scatter(%1, t, len: n * 2)
+      reads direct: -; indexed: -; uniform: n
+      materialises t: f32, hist: f32
+      ends at length change
+    }
+    stage 2 [gather<sum> → iota → map<toF32>] {
+      over n
+      s = gather<sum>(t, group: 2)
+      %9 = iota(n)
+      %10 = map<toF32>(%9)
+      reads direct: -; indexed: t: f32; uniform: n
+      materialises s: f32, %10: f32
+      ends at length change
+    }
+    stage 3 [scatter<repeat> → fill → map<add>] {
+      over n * 2
+      %11 = scatter<repeat>(%10, fanout: 2)
+      %12 = fill(n * 2, 1.0)
+      e = map<add>(%11, %12)
+      reads direct: -; indexed: %10: f32; uniform: n
+      materialises e: f32
+      ends at length change
+    }
+    out s = s
+    out hist = hist
+    stage 4 [gather<sum>] {
+      over (n * 2) / 4
+      q = gather<sum>(e, group: 4)
+      reads direct: -; indexed: e: f32; uniform: -
+      materialises q: f32
+      ends at control flow
+    }
+    out q = q
+    ---
+    s = [1.0, 5.0, 9.0, 13.0]
+    q = [6.0, 14.0]
+    hist = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]
     "
     );
 }

@@ -417,8 +417,7 @@ fn symbolic_lengths_of_fan_out_group_gather_and_compaction() {
     %26: f32, len = n * 2
     t: f32, len = n * 2
     ---
-    [iota → map<toF32>] over n * k
-    [gather<sum>] over n
+    [iota → map<toF32> → gather<sum>] over n
     [scatter<repeat> → fill → map<lt> → map<toU32> → exclusiveScan<add>] over n * k
     [reduce<add>] over n * k
     [iota → scatter] over n * k

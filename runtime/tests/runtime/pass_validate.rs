@@ -15,8 +15,13 @@ fn compiled(name: &str, fuse: bool) -> Plan {
 
 /// The validator's findings on the compaction example after `break_it`.
 fn check(fuse: bool, break_it: impl FnOnce(&mut Plan)) -> Vec<String> {
+    check_pipeline("examples/compaction.dpp", fuse, break_it)
+}
+
+/// The validator's findings on pipeline `name` after `break_it`.
+fn check_pipeline(name: &str, fuse: bool, break_it: impl FnOnce(&mut Plan)) -> Vec<String> {
     // An unfused plan is made of stages too, one op each.
-    let mut plan = compiled("examples/compaction.dpp", fuse);
+    let mut plan = compiled(name, fuse);
     let phase = PlanPhase::Fused;
     assert_eq!(
         validate_plan(&plan.vars, &plan.body, phase),
@@ -40,6 +45,7 @@ fn every_example_pipeline_is_valid_fused_and_unfused() {
         "examples/compaction.dpp",
         "examples/histogram.dpp",
         "examples/prefix_sum.dpp",
+        "examples/sample_counts.dpp",
     ] {
         for fuse in [true, false] {
             let plan = compiled(name, fuse);
@@ -146,6 +152,50 @@ fn a_stage_that_reads_its_own_sink_result_is_caught() {
         problems
             .iter()
             .any(|p| p.contains("which a sink of the same stage completes only at its end")),
+        "{problems:#?}"
+    );
+}
+
+/// A nested stage's inner values stay inside it: storing one, or reading
+/// one after the group gather that closes the level, is caught.
+#[test]
+fn an_inner_value_that_leaves_its_level_is_caught() {
+    fn nested(plan: &mut Plan) -> &mut dpp_runtime::compile::ir::Stage {
+        plan.body
+            .iter_mut()
+            .find_map(|node| match node {
+                Node::Stage(stage) if stage.inner.is_some() => Some(stage),
+                _ => None,
+            })
+            .expect("a nested stage")
+    }
+    let problems = check_pipeline("examples/sample_counts.dpp", true, |plan| {
+        let stage = nested(plan);
+        let inner_value = stage.ops[0].outputs[0];
+        stage.materialises.push(inner_value);
+        let last = stage.ops.len() - 1;
+        stage.ops[last].inputs[0] = inner_value;
+    });
+    assert!(
+        problems
+            .iter()
+            .any(|p| p.contains("materialises `pair` (%8), a value of its inner level")),
+        "{problems:#?}"
+    );
+    assert!(
+        problems
+            .iter()
+            .any(|p| p.contains("reduce<add> reads `pair` (%8), a value of its inner level")),
+        "{problems:#?}"
+    );
+    let problems = check_pipeline("examples/sample_counts.dpp", true, |plan| {
+        let stage = nested(plan);
+        stage.inner.as_mut().unwrap().ops -= 1;
+    });
+    assert!(
+        problems
+            .iter()
+            .any(|p| p.contains("does not gather groups of its inner level")),
         "{problems:#?}"
     );
 }
