@@ -708,9 +708,10 @@ impl StageRun<'_, '_> {
                         OpKind::GroupGather { .. } => range.start * k..range.end * k,
                         _ => range.start / k..range.end / k,
                     };
-                    // Only a gather of groups of one runs after other ops of its
-                    // stage (`fuse::is_elementwise_group`): its input may be the
-                    // chunk's own values, element for element.
+                    // Only a gather of groups of one (`fuse::is_elementwise_group`)
+                    // or the gather that closes an inner level runs after other
+                    // ops of its stage: its input may then be the chunk's own
+                    // values, element for element or the chunk's groups' elements.
                     let src = lookup(&locals, op.inputs[0])?;
                     let functor = self.functor(op)?;
                     let mut outputs = new_outputs(range.len());
