@@ -130,7 +130,7 @@ impl Generator<'_, '_, '_> {
         // A nested stage's inner ops become the body of the function its
         // closing group gather reads them through, at the inner index (its
         // `i`); the kernel's own body waits here meanwhile.
-        let inner_ops = call.stage.inner.as_ref().map_or(0, |inner| inner.ops);
+        let inner_ops = call.stage.inner_ops();
         let mut kernel_body = None;
         for (position, (op, values)) in call.stage.ops.iter().zip(&call.host_values).enumerate() {
             if position == 0 && inner_ops > 0 {

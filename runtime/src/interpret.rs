@@ -848,13 +848,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
             OpKind::Iota { count } | OpKind::Fill { count, .. } => {
                 self.eval_count(count, "the length")?
             }
-            OpKind::GroupGather { .. } => {
-                let src = self.array_len(head.inputs[0])?;
-                if src % k != 0 {
-                    return Err(RunError::bad_input(format!("group gather of {src} elements in groups of {k}: {src} is not a multiple of {k}")));
-                }
-                src / k
-            }
+            OpKind::GroupGather { .. } => groups_of(self.array_len(head.inputs[0])?, k)?,
             OpKind::Expand { .. } => {
                 let n = self
                     .array_len(head.inputs[0])?
@@ -870,13 +864,7 @@ impl<'a, B: Backend> Interpreter<'a, B> {
         };
         // A nested stage runs over the groups its inner level's closing gather makes.
         let len = match &stage.inner {
-            Some(inner) => {
-                let k = host_values[inner.ops].group;
-                if head_len % k != 0 {
-                    return Err(RunError::bad_input(format!("group gather of {head_len} elements in groups of {k}: {head_len} is not a multiple of {k}")));
-                }
-                head_len / k
-            }
+            Some(inner) => groups_of(head_len, host_values[inner.ops].group)?,
             None => head_len,
         };
         let inner_reads = stage.inner.iter().flat_map(|inner| &inner.reads_direct);
@@ -903,6 +891,16 @@ impl<'a, B: Backend> Interpreter<'a, B> {
         let measured = self.backend.run_stage(&call, &mut self.slots)?;
         Ok((len, measured))
     }
+}
+
+/// The number of groups of `k` in `len` elements, which must be whole.
+fn groups_of(len: usize, k: usize) -> Result<usize, RunError> {
+    if !len.is_multiple_of(k) {
+        return Err(RunError::bad_input(format!(
+            "group gather of {len} elements in groups of {k}: {len} is not a multiple of {k}"
+        )));
+    }
+    Ok(len / k)
 }
 
 /// The variables a stage writes element by element: everything it

@@ -503,7 +503,6 @@ impl StageFormer<'_> {
             || stage.index_space.is_none()
             || self.index_space(op).is_none()
             || !stage.locals.contains(&op.inputs[0])
-            || !stage.outputs.is_empty()
             || stage.ops.iter().any(Op::is_sink)
         {
             return false;
@@ -515,8 +514,7 @@ impl StageFormer<'_> {
                 return false;
             }
         }
-        let mut reads_in_stage = self.reads_in(stage.ops.iter().chain([op]));
-        reads_in_stage.resize(self.vars.len(), 0);
+        let reads_in_stage = self.reads_in(stage.ops.iter().chain([op]));
         stage.locals.iter().all(|&v| {
             let i = v.0 as usize;
             self.usage.definitions[i] == 1

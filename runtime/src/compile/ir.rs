@@ -455,11 +455,9 @@ impl Stage {
         self.inner.as_ref().map(|inner| &self.ops[inner.ops])
     }
 
-    /// Whether the op at `position` runs at the inner level.
-    pub fn is_inner(&self, position: usize) -> bool {
-        self.inner
-            .as_ref()
-            .is_some_and(|inner| position < inner.ops)
+    /// The number of ops at the inner level (0 for a stage of one level).
+    pub fn inner_ops(&self) -> usize {
+        self.inner.as_ref().map_or(0, |inner| inner.ops)
     }
 
     /// The stage's ops in order: `iota → map<cameraRay> → map<intersect>`.

@@ -229,7 +229,7 @@ impl Printer<'_> {
             .map_or("?".to_string(), |e| host_text(e, self.plan));
         self.line(depth + 1, &format!("over {over}"));
         // A nested stage's inner ops, a group of them for each element.
-        let inner_ops = stage.inner.as_ref().map_or(0, |inner| inner.ops);
+        let inner_ops = stage.inner_ops();
         if let Some(inner) = &stage.inner {
             let over = inner
                 .index_space
