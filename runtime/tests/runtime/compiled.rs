@@ -321,6 +321,47 @@ fn the_pair_idiom_every_point_with_each_item() {
     }
 }
 
+/// Selects whose conditions hold over runs of elements, so that whole
+/// blocks of four take one side and the kernels skip the steps only the
+/// other side reads: nested, on either side, with a `pow` and a value also
+/// read after the select, and through the pair idiom's items; and a
+/// gather inside a discarded side still fails where its index does.
+#[test]
+fn a_block_skips_the_side_of_a_select_that_none_of_its_lanes_takes() {
+    check(&over_edges(
+        "
+    run = iota(len(a)) / 8 % 3 == 0
+    other = iota(len(a)) / 4 % 2 == 1
+    u = vec3(a, b, 1.0)
+    heavy = normalize(u) * sqrt(abs(a)) + vec3(pow(abs(b), a))
+    out taken = select(run, heavy, vec3(0.0))
+    out nested = select(run, select(other, a * b + exp(a), b / a), 0.0)
+    out otherSide = select(other, 1.0, sqrt(a) * log(b))
+    shared = a * 3.0 + b
+    out sharedToo = select(run, shared, 0.0) + shared",
+    ));
+    for items in [1, 3] {
+        check(&over_edges(&format!(
+            "
+    k = iota(len(a) * {items})
+    p = gather(k / {items}, a)
+    q = gather(k % {items}, b)
+    lit = k / {items} / 8 % 2 == 0
+    out terms = select(lit && q > 0.0, pow(abs(p), q) * p + q, 0.0)
+    out sums = gather<sum>(select(lit, p * q + sqrt(abs(p)), 0.0), group: {items})"
+        )));
+    }
+    let failing = over_edges(
+        "
+    never = iota(len(a)) > 1000
+    out g = select(never, gather(toU32(a) + 5, b) * 2.0, 0.0)",
+    );
+    let compiled = run(&failing, Elementwise::Compiled).map(|_| ());
+    let columns = run(&failing, Elementwise::Columns).map(|_| ());
+    assert!(columns.is_err(), "the discarded gather should fail");
+    assert_eq!(compiled, columns);
+}
+
 /// A failing element stops the compiled loop; the ops then run one by one
 /// and report it exactly as the column run does.
 #[test]

@@ -17,6 +17,7 @@
 //! element or block, plus one); the caller then runs the segment column at
 //! a time, which reports the error itself.
 
+use super::skipped_sides::{self, SkippableSides};
 use super::{Segment, SegmentStep};
 use crate::host::HostValue;
 use crate::types::{ElemType, RecordRegistry};
@@ -215,13 +216,7 @@ fn selected_calls(segment: &Segment) -> HashMap<u32, (u32, bool)> {
         }
         let mut side = None;
         let all_selected = segment.steps.iter().all(|reader| {
-            let reads: Vec<u32> = match reader {
-                SegmentStep::Map { inputs, .. } => inputs.iter().map(|(v, _)| *v).collect(),
-                SegmentStep::Gather { index, .. } => vec![*index],
-                SegmentStep::Field { record, .. } => vec![*record],
-                SegmentStep::Iota { .. } | SegmentStep::Fill { .. } => Vec::new(),
-            };
-            if !reads.contains(&output.0) {
+            if !reader.reads().contains(&output.0) {
                 return true;
             }
             let SegmentStep::Map {
@@ -404,6 +399,8 @@ struct Emitter<'b, 'f> {
     call_slot: StackSlot,
     /// The libm calls that only a `select` reads (see [`selected_calls`]).
     selected_calls: HashMap<u32, (u32, bool)>,
+    /// The selects' sides a block may skip (see [`skipped_sides`]).
+    skippable: SkippableSides,
     /// The lanes the block calls being emitted must compute (a mask), if not all.
     wanted: Option<Value>,
     /// The segment's fan-out, if it has one (see [`FanOut`]).
@@ -580,8 +577,15 @@ impl Emitter<'_, '_> {
             fan_out: FanOut::find(segment),
             fan_lanes: None,
             selected_calls: selected_calls(segment),
+            skippable: SkippableSides::default(),
             wanted: None,
         };
+        let point_steps = emitter.fan_out.as_ref().map(|fan| fan.point_steps.clone());
+        emitter.skippable = skipped_sides::find(segment, |k, p| {
+            point_steps
+                .as_ref()
+                .is_none_or(|steps| steps[k] == steps[p])
+        });
         let invariants = emitter.invariants(segment, inputs, lengths, outputs, params, first);
         let b = &mut emitter.b;
         // Every element gathers, so an empty array it gathers from fails the
@@ -798,74 +802,157 @@ impl Emitter<'_, '_> {
         }
     }
 
-    /// The steps at the positions `chosen` takes, in order.
+    /// The steps at the positions `chosen` takes, in order; in a block, a
+    /// select's skippable side where the select comes.
     fn steps(
         &mut self,
         segment: &Segment,
         invariants: &Invariants,
         chosen: impl Fn(usize) -> bool,
     ) -> Result<(), String> {
-        for (position, step) in segment.steps.iter().enumerate() {
-            if !chosen(position) {
-                continue;
+        for position in 0..segment.steps.len() {
+            let in_a_side = self.width > 1 && self.skippable.emitted_by.contains_key(&position);
+            if chosen(position) && !in_a_side {
+                self.step(segment, invariants, position)?;
             }
-            if let Some(val) = self.fan_value(step) {
-                self.values.insert(step.output().0, val);
-                continue;
-            }
-            let val = match step {
-                SegmentStep::Iota { .. } => {
-                    let index = self.iota(invariants.first);
-                    Val::Prim {
-                        components: vec![index],
-                    }
-                }
-                SegmentStep::Fill { fill, .. } => {
-                    let (one, block) = &invariants.fills[*fill];
-                    if self.width == 1 { one } else { block }.clone()
-                }
-                SegmentStep::Field { record, field, .. } => self.field(*record, *field)?,
-                SegmentStep::Gather {
-                    index, gathered: g, ..
-                } => {
-                    let places = match self.places_by_index.get(index) {
-                        Some(places) => places.clone(),
-                        None => {
-                            let limit = invariants.limits.get(index).ok_or("a gather's limit")?;
-                            let index_value = self.prim(*index)?[0];
-                            let places = self.gathered_places(index_value, limit);
-                            self.places_by_index.insert(*index, places.clone());
-                            places
-                        }
-                    };
-                    let leaves = &invariants.gathered[*g];
-                    self.at(segment.gathered[*g].1, leaves, places)
-                }
-                SegmentStep::Map {
-                    functor,
-                    inputs,
-                    output_type,
-                    named,
-                    output,
-                } => {
-                    // A fan-out's point steps come before an item's condition: all lanes then.
-                    let condition = self
-                        .selected_calls
-                        .get(&output.0)
-                        .filter(|_| self.width > 1)
-                        .and_then(|&(condition, when)| Some((self.prim(condition).ok()?, when)));
-                    self.wanted = match condition {
-                        Some((mask, true)) => Some(mask[0]),
-                        Some((mask, false)) => Some(self.b.ins().bnot(mask[0])),
-                        None => None,
-                    };
-                    let val = self.map(functor, inputs, *output_type, named);
-                    self.wanted = None;
-                    val?
-                }
-            };
-            self.values.insert(step.output().0, val);
         }
+        Ok(())
+    }
+
+    /// The select at `select`'s skippable side: its steps, in a branch that
+    /// the block takes unless no lane takes the side (see [`skipped_sides`]);
+    /// where it is skipped, the select gets its other input for both.
+    fn skippable_side(
+        &mut self,
+        segment: &Segment,
+        invariants: &Invariants,
+        select: usize,
+    ) -> Result<(), String> {
+        let Some(side) = self.skippable.sides.get(&select) else {
+            return Ok(());
+        };
+        let (taken_where_true, value) = (side.taken_where_true, side.value);
+        let steps: Vec<usize> = side
+            .steps
+            .iter()
+            .copied()
+            .filter(|step| self.skippable.emitted_by.get(step) == Some(&select))
+            .collect();
+        let SegmentStep::Map { inputs, .. } = &segment.steps[select] else {
+            return Err("a skippable side of a step that is not a select".into());
+        };
+        let (condition, other) = match taken_where_true {
+            true => (inputs[0].0, inputs[2].0),
+            false => (inputs[0].0, inputs[1].0),
+        };
+        // The block's checks so far fail it before it branches.
+        self.check();
+        let mask = self.prim(condition)?[0];
+        let (compute, skipped, merge) = (
+            self.b.create_block(),
+            self.b.create_block(),
+            self.b.create_block(),
+        );
+        if taken_where_true {
+            let any = self.b.ins().vany_true(mask);
+            self.b.ins().brif(any, compute, &[], skipped, &[]);
+        } else {
+            let all = self.b.ins().vall_true(mask);
+            self.b.ins().brif(all, skipped, &[], compute, &[]);
+        }
+        self.b.switch_to_block(compute);
+        for step in steps {
+            self.step(segment, invariants, step)?;
+        }
+        let taken = self.prim(value)?;
+        self.check();
+        let args: Vec<_> = taken.iter().map(|v| (*v).into()).collect();
+        self.b.ins().jump(merge, &args);
+        self.b.switch_to_block(skipped);
+        let other = self.prim(other)?;
+        let args: Vec<_> = other.iter().map(|v| (*v).into()).collect();
+        self.b.ins().jump(merge, &args);
+        for v in &taken {
+            let ty = self.b.func.dfg.value_type(*v);
+            self.b.append_block_param(merge, ty);
+        }
+        self.b.switch_to_block(merge);
+        let components = self.b.block_params(merge).to_vec();
+        // The side's other values do not reach past the branch.
+        for &step in &self.skippable.sides[&select].steps {
+            self.values.remove(&segment.steps[step].output().0);
+        }
+        self.values.insert(value, Val::Prim { components });
+        Ok(())
+    }
+
+    /// The step at `position`.
+    fn step(
+        &mut self,
+        segment: &Segment,
+        invariants: &Invariants,
+        position: usize,
+    ) -> Result<(), String> {
+        let step = &segment.steps[position];
+        if let Some(val) = self.fan_value(step) {
+            self.values.insert(step.output().0, val);
+            return Ok(());
+        }
+        if self.width > 1 {
+            self.skippable_side(segment, invariants, position)?;
+        }
+        let val = match step {
+            SegmentStep::Iota { .. } => {
+                let index = self.iota(invariants.first);
+                Val::Prim {
+                    components: vec![index],
+                }
+            }
+            SegmentStep::Fill { fill, .. } => {
+                let (one, block) = &invariants.fills[*fill];
+                if self.width == 1 { one } else { block }.clone()
+            }
+            SegmentStep::Field { record, field, .. } => self.field(*record, *field)?,
+            SegmentStep::Gather {
+                index, gathered: g, ..
+            } => {
+                let places = match self.places_by_index.get(index) {
+                    Some(places) => places.clone(),
+                    None => {
+                        let limit = invariants.limits.get(index).ok_or("a gather's limit")?;
+                        let index_value = self.prim(*index)?[0];
+                        let places = self.gathered_places(index_value, limit);
+                        self.places_by_index.insert(*index, places.clone());
+                        places
+                    }
+                };
+                let leaves = &invariants.gathered[*g];
+                self.at(segment.gathered[*g].1, leaves, places)
+            }
+            SegmentStep::Map {
+                functor,
+                inputs,
+                output_type,
+                named,
+                output,
+            } => {
+                // A fan-out's point steps come before an item's condition: all lanes then.
+                let condition = self
+                    .selected_calls
+                    .get(&output.0)
+                    .filter(|_| self.width > 1)
+                    .and_then(|&(condition, when)| Some((self.prim(condition).ok()?, when)));
+                self.wanted = match condition {
+                    Some((mask, true)) => Some(mask[0]),
+                    Some((mask, false)) => Some(self.b.ins().bnot(mask[0])),
+                    None => None,
+                };
+                let val = self.map(functor, inputs, *output_type, named);
+                self.wanted = None;
+                val?
+            }
+        };
+        self.values.insert(step.output().0, val);
         Ok(())
     }
 

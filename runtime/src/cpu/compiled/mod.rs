@@ -17,6 +17,7 @@
 //! once per process; fill values are passed in, not compiled in.
 
 mod codegen;
+mod skipped_sides;
 
 use crate::column::{Column, ColumnView};
 use crate::compile::ir::{Op, OpKind, VarId};
@@ -88,6 +89,16 @@ impl SegmentStep {
             | SegmentStep::Field { output, .. }
             | SegmentStep::Gather { output, .. }
             | SegmentStep::Map { output, .. } => *output,
+        }
+    }
+
+    /// The segment's values it reads (not the gathered arrays).
+    fn reads(&self) -> Vec<u32> {
+        match self {
+            SegmentStep::Map { inputs, .. } => inputs.iter().map(|(v, _)| *v).collect(),
+            SegmentStep::Gather { index, .. } => vec![*index],
+            SegmentStep::Field { record, .. } => vec![*record],
+            SegmentStep::Iota { .. } | SegmentStep::Fill { .. } => Vec::new(),
         }
     }
 }
