@@ -74,9 +74,12 @@ fn the_preludes_compaction_converts_keep_once() {
     op slot = exclusiveScan<add>(%5)
     op %9 = reduce<add>(%5)
     let n: int = %9
-    op %11 = iota(len(keep))
-    op %12 = scatter(slot, %11, len: n, mask: keep)
-    op kept = gather(%12, values)
+    op at = iota(n)
+    if n < len(keep) {
+      op %13 = iota(len(keep))
+      op at = scatter(slot, %13, len: n, mask: keep)
+    }
+    op kept = gather(at, values)
     out kept = kept
     ---
     kept = [0, 1, 2, 3]

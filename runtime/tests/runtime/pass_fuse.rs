@@ -786,7 +786,7 @@ fn rule4_compaction_changes_the_length() {
         }
         "#,
         @"
-    pipeline p (fused, 4 stages)
+    pipeline p (fused, 5 stages)
     param n: int = 10
     let n: int = 10
     stage 1 [iota → map<toF32> → fill → map<lt> → map<toU32> → exclusiveScan<add>] {
@@ -809,19 +809,28 @@ fn rule4_compaction_changes_the_length() {
       ends at reduce result read by the host
     }
     let n#1: int = %11
-    stage 3 [iota → scatter] {
-      over n
-      %13 = iota(len(keep))
-      %14 = scatter(slot, %13, len: n#1, mask: keep)
-      reads direct: slot: u32, keep: bool; indexed: -; uniform: len(keep), n#1
-      materialises %14: u32
-      ends at length change
-    }
-    stage 4 [gather → map<add>] {
+    stage 3 [iota] {
       over n#1
-      kept = gather(%14, x)
+      at = iota(n#1)
+      reads direct: -; indexed: -; uniform: n#1
+      materialises at: u32
+      ends at control flow
+    }
+    if n#1 < len(keep) {
+      stage 4 [iota → scatter] {
+        over n
+        %15 = iota(len(keep))
+        at = scatter(slot, %15, len: n#1, mask: keep)
+        reads direct: slot: u32, keep: bool; indexed: -; uniform: len(keep), n#1
+        materialises at: u32
+        ends at control flow
+      }
+    }
+    stage 5 [gather → map<add>] {
+      over len(at)
+      kept = gather(at, x)
       r = map<add>(kept, kept)
-      reads direct: %14: u32; indexed: x: f32; uniform: -
+      reads direct: at: u32; indexed: x: f32; uniform: -
       materialises r: f32
       ends at control flow
     }

@@ -134,18 +134,24 @@ fn a_variable_out_of_range_and_a_stray_break_are_caught() {
 #[test]
 fn a_stage_that_reads_its_own_sink_result_is_caught() {
     let problems = check(true, |plan| {
-        // The scan of `compactIndex` and the gather that reads its result,
-        // forced into one stage.
-        let stages = stage_positions(plan);
-        let (first, rest) = stages.split_first().unwrap();
-        let mut merged = Vec::new();
-        for &i in rest.iter().rev() {
-            if let Node::Stage(stage) = plan.body.remove(i) {
-                merged.splice(0..0, stage.ops);
+        // The scan of `compactIndex` and the scatter that reads its result
+        // (the reverse index, in the branch taken when some element is
+        // dropped), forced into one stage.
+        let reverse_index = plan
+            .body
+            .iter_mut()
+            .find_map(|node| match node {
+                Node::If { then_body, .. } => Some(std::mem::take(then_body)),
+                _ => None,
+            })
+            .expect("compactIndex's branch");
+        let first = stage_positions(plan)[0];
+        if let Node::Stage(stage) = &mut plan.body[first] {
+            for node in reverse_index {
+                if let Node::Stage(scatter) = node {
+                    stage.ops.extend(scatter.ops);
+                }
             }
-        }
-        if let Node::Stage(stage) = &mut plan.body[*first] {
-            stage.ops.extend(merged);
         }
     });
     assert!(
