@@ -154,6 +154,21 @@ impl StageFormer<'_> {
                         field,
                     });
                 }
+                // A host value that reads nothing the open stages make, which
+                // they do not read as it was, is computed before them (a `fn`'s
+                // host argument, a param's arithmetic): it does not end them.
+                Node::Host { dst, .. }
+                    if self.fuse
+                        && [&open, &side].iter().all(|stage| {
+                            !stage.as_ref().is_some_and(|s| {
+                                s.reads(dst)
+                                    || node_reads(&node).iter().any(|v| s.locals.contains(v))
+                            })
+                        }) =>
+                {
+                    self.wrote(dst);
+                    out.push(node);
+                }
                 Node::Output { var, .. } if self.fuse => {
                     // After the stage that makes the value, or here if none open does.
                     match [&mut side, &mut open]

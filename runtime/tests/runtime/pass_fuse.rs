@@ -88,6 +88,62 @@ fn rule1_a_map_chain_is_one_stage_without_its_intermediates() {
     );
 }
 
+/// A host value between two maps that reads nothing the stage makes (here
+/// a `fn`'s host argument and a param's arithmetic) is computed before the
+/// stage and does not end it; one that reads a value the stage makes
+/// (`len(b)`) does.
+#[test]
+fn rule1_a_host_value_of_earlier_values_does_not_end_the_stage() {
+    check!(
+        r#"
+        param n = 6
+        fn scaled(a, k) {
+            return a * k
+        }
+        pipeline p {
+            a = iota(n) → map<toF32>
+            b = scaled(a, 2.0)
+            twice = n * 2
+            c = b + a * float(twice)
+            m = len(b)
+            out d = c * float(m)
+        }
+        "#,
+        @"
+    pipeline p (fused, 2 stages)
+    param n: int = 6
+    let n: int = 6
+    let k: float = 2.0
+    let twice: int = n * 2
+    stage 1 [iota → map<toF32> → fill → map<mul> → fill → map<mul> → map<add>] {
+      over n
+      %1 = iota(n)
+      a = map<toF32>(%1)
+      %14 = fill(n, k)
+      b = map<mul>(a, %14)
+      %15 = fill(n, float(twice))
+      %8 = map<mul>(a, %15)
+      c = map<add>(b, %8)
+      reads direct: -; indexed: -; uniform: n, k, twice
+      materialises b: f32, c: f32
+      ends at control flow
+    }
+    let m: int = len(b)
+    stage 2 [fill → map<mul>] {
+      over n
+      %16 = fill(n, float(m))
+      d = map<mul>(c, %16)
+      reads direct: c: f32; indexed: -; uniform: n, m
+      materialises d: f32
+      ends at control flow
+    }
+    out d = d
+    ---
+    d = [0.0, 84.0, 168.0, 252.0, 336.0, 420.0]
+    "
+    );
+}
+
 #[test]
 fn rule1_an_intermediate_read_elsewhere_is_materialised() {
     // `b` is read again after the stage ends (at the output): it is
