@@ -96,6 +96,40 @@ fn written_out_shading_equals_the_shader_functor_on_the_gpu() {
     }
 }
 
+/// With `denseHits` 0 the written-out WORKLOAD2 shades every ray, misses
+/// too, and keeps the background where they are (the path a view the
+/// surface nearly fills takes): the same bits as compacting first.
+#[test]
+fn the_written_out_workload2_without_compaction_gives_the_same_bits() {
+    let dir = scene_dir();
+    let outputs = ["image", "alpha", "depth"];
+    let mut boxes = vec!["scene.obj", "--size", "96x64"];
+    boxes.extend_from_slice(SCENE_VIEW);
+    for args in [vec!["--size", "80x60"], boxes] {
+        let compacted = run(
+            dir.path(),
+            "workload2_expressions.dpp",
+            &args,
+            "cpu",
+            &outputs,
+        );
+        let mut dense_args = args.clone();
+        dense_args.extend(["--set", "denseHits=0"]);
+        let dense = run(
+            dir.path(),
+            "workload2_expressions.dpp",
+            &dense_args,
+            "cpu",
+            &outputs,
+        );
+        for (name, (a, b)) in outputs.iter().zip(compacted.iter().zip(&dense)) {
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(a), bits(b), "{args:?}: {name}");
+        }
+        assert!(compacted[1].contains(&0.0), "{args:?}: nothing was missed");
+    }
+}
+
 /// The CPU's compiled element-wise loops (the default) against running the
 /// same ops one at a time over columns (`--cpu-elementwise columns`), on the
 /// written-out pipelines, whose shading is almost all compiled: the same

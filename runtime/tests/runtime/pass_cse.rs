@@ -70,14 +70,17 @@ fn the_preludes_compaction_converts_keep_once() {
     op values = iota(10)
     op %2 = fill(10, 4)
     op keep = map<lt>(values, %2)
-    op %5 = map<toU32>(keep)
-    op slot = exclusiveScan<add>(%5)
-    op %9 = reduce<add>(%5)
-    let n: int = %9
-    op at = iota(n)
-    if n < len(keep) {
-      op %13 = iota(len(keep))
-      op at = scatter(slot, %13, len: n, mask: keep)
+    let dense: float = 1.0
+    op %6 = map<toU32>(keep)
+    op slot = exclusiveScan<add>(%6)
+    op %10 = reduce<add>(%6)
+    let n: int = %10
+    op at = iota(0)
+    if float(n) < (dense * float(len(keep))) {
+      op %14 = iota(len(keep))
+      op at = scatter(slot, %14, len: n, mask: keep)
+    } else {
+      op at = iota(len(keep))
     }
     op kept = gather(at, values)
     out kept = kept

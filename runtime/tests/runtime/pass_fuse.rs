@@ -842,47 +842,56 @@ fn rule4_compaction_changes_the_length() {
         }
         "#,
         @"
-    pipeline p (fused, 5 stages)
+    pipeline p (fused, 6 stages)
     param n: int = 10
     let n: int = 10
+    let dense: float = 1.0
     stage 1 [iota → map<toF32> → fill → map<lt> → map<toU32> → exclusiveScan<add>] {
       over n
       %1 = iota(n)
       x = map<toF32>(%1)
       %4 = fill(n, 4.5)
       keep = map<lt>(x, %4)
-      %7 = map<toU32>(keep)
-      slot = exclusiveScan<add>(%7)
+      %8 = map<toU32>(keep)
+      slot = exclusiveScan<add>(%8)
       reads direct: -; indexed: -; uniform: n
-      materialises x: f32, keep: bool, %7: u32, slot: u32
+      materialises x: f32, keep: bool, %8: u32, slot: u32
       ends at scan
     }
     stage 2 [reduce<add>] {
       over n
-      %11 = reduce<add>(%7)
-      reads direct: %7: u32; indexed: -; uniform: -
-      materialises %11: int
+      %12 = reduce<add>(%8)
+      reads direct: %8: u32; indexed: -; uniform: -
+      materialises %12: int
       ends at reduce result read by the host
     }
-    let n#1: int = %11
+    let n#1: int = %12
     stage 3 [iota] {
-      over n#1
-      at = iota(n#1)
-      reads direct: -; indexed: -; uniform: n#1
+      over 0
+      at = iota(0)
+      reads direct: -; indexed: -; uniform: -
       materialises at: u32
       ends at control flow
     }
-    if n#1 < len(keep) {
+    if float(n#1) < (dense * float(len(keep))) {
       stage 4 [iota → scatter] {
         over n
-        %15 = iota(len(keep))
-        at = scatter(slot, %15, len: n#1, mask: keep)
+        %16 = iota(len(keep))
+        at = scatter(slot, %16, len: n#1, mask: keep)
         reads direct: slot: u32, keep: bool; indexed: -; uniform: len(keep), n#1
         materialises at: u32
         ends at control flow
       }
+    } else {
+      stage 5 [iota] {
+        over n
+        at = iota(len(keep))
+        reads direct: -; indexed: -; uniform: len(keep)
+        materialises at: u32
+        ends at control flow
+      }
     }
-    stage 5 [gather → map<add>] {
+    stage 6 [gather → map<add>] {
       over len(at)
       kept = gather(at, x)
       r = map<add>(kept, kept)
