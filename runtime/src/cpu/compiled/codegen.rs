@@ -42,18 +42,26 @@ pub(crate) type KernelEntry =
 
 /// The libm functions the float kernels call, by name: the very functions the
 /// generic functors' CPU kernels call, so that results agree to the bit.
+/// Never inlined: `f32::powf` and the others are intrinsics LLVM may
+/// speculate, and inlined into a block call it computed all four lanes and
+/// masked the unwanted ones, which is the work a `select` was to spare.
+#[inline(never)]
 extern "C" fn dpp_pow(a: f32, b: f32) -> f32 {
     a.powf(b)
 }
+#[inline(never)]
 extern "C" fn dpp_exp(x: f32) -> f32 {
     x.exp()
 }
+#[inline(never)]
 extern "C" fn dpp_log(x: f32) -> f32 {
     x.ln()
 }
+#[inline(never)]
 extern "C" fn dpp_sin(x: f32) -> f32 {
     x.sin()
 }
+#[inline(never)]
 extern "C" fn dpp_cos(x: f32) -> f32 {
     x.cos()
 }
