@@ -152,6 +152,12 @@ pub struct BenchArgs {
     /// (default: ./pipelines, else the source tree's).
     #[arg(long, value_name = "DIR")]
     pipelines: Option<PathBuf>,
+    /// Measure FILE against the workload it stands for (the one workload
+    /// --workloads names), side by side: their fused plans run frame by
+    /// frame in turn on each view, with the warm-up and measured rounds set,
+    /// and the report gives both frames and their ratio.
+    #[arg(long, value_name = "FILE.dpp")]
+    versus: Option<PathBuf>,
     /// Also write the markdown tables to FILE.
     #[arg(long, value_name = "FILE.md")]
     markdown: Option<PathBuf>,
@@ -329,6 +335,17 @@ fn check(args: &BenchArgs) -> Result<Setup, String> {
                 "error: cannot find {}; name the folder of the workload pipelines with --pipelines DIR",
                 path.display()
             ));
+        }
+    }
+    if let Some(versus) = &args.versus {
+        if volume || workloads.len() != 1 {
+            return Err(format!(
+                "error: --versus {} is measured against one workload: name it alone in --workloads (1, 2 or 3)",
+                versus.display()
+            ));
+        }
+        if !versus.is_file() {
+            return Err(format!("error: --versus: cannot find {}", versus.display()));
         }
     }
     if volume {
@@ -564,6 +581,39 @@ pub struct ViewResult {
     pub engines: Vec<EngineResult>,
     /// WORKLOAD2 and WORKLOAD3 with each engine.
     pub engine_frames: Vec<TracedByEngine>,
+    /// `--versus`: the other file against the workload.
+    pub side_by_side: Option<SideBySide>,
+}
+
+/// `--versus`: a pipeline file and the workload it stands for, their fused
+/// frames measured in turn on one view.
+#[derive(Clone, Debug)]
+pub struct SideBySide {
+    pub workload: u32,
+    /// The files' names, as the report prints them.
+    pub own: String,
+    pub versus: String,
+    /// Each measured round's frame of the workload's file and of the other.
+    pub own_ms: Vec<f64>,
+    pub versus_ms: Vec<f64>,
+}
+
+impl SideBySide {
+    /// The other file's frame over the workload's, round by round: each
+    /// ratio is of two frames run one after the other, so that a slow spell
+    /// of the machine slows both.
+    pub fn ratios(&self) -> Vec<f64> {
+        (self.versus_ms.iter().zip(&self.own_ms))
+            .map(|(versus, own)| versus / own)
+            .collect()
+    }
+}
+
+fn file_name(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |name| name.to_string_lossy().into_owned(),
+    )
 }
 
 impl ViewResult {
@@ -658,6 +708,10 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         let unfused = compile(&path, library, false)?;
         plans.push((workload, path, fused, unfused));
     }
+    let versus = match &args.versus {
+        Some(path) => Some((path, compile(path, library, true)?)),
+        None => None,
+    };
 
     // On the GPU the stage times come from as many profiled runs as measured ones.
     let profiled = if gpu.is_some() { args.rounds } else { 0 };
@@ -673,6 +727,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         }
     };
     let per_view = 2 * setup.workloads.len() as u64
+        + if versus.is_some() { 2 } else { 0 }
         + embree_plans(1, 2, 4)
         + embree_plans(2, 1, 4)
         + embree_plans(3, 1, 2);
@@ -743,6 +798,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 workloads: Vec::new(),
                 engines: Vec::new(),
                 engine_frames: Vec::new(),
+                side_by_side: None,
             };
             let mut dpp_prims = None;
             for (workload, _, fused, unfused) in &plans {
@@ -770,6 +826,23 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                     workload: *workload,
                     fused,
                     unfused,
+                });
+            }
+            if let (Some((path, versus)), [(workload, own_path, own, _)]) = (&versus, &plans[..]) {
+                progress.set_message(format!(
+                    "{} {view_name} workload{workload} against {}",
+                    spec.name(),
+                    path.display()
+                ));
+                let runs =
+                    |plan| FrameRuns::new(plan, library, &view, &pool, gpu, &args, &progress);
+                let (own_ms, versus_ms) = measure_side_by_side(&runs(own), &runs(versus), &args)?;
+                view_result.side_by_side = Some(SideBySide {
+                    workload: *workload,
+                    own: file_name(own_path),
+                    versus: file_name(path),
+                    own_ms,
+                    versus_ms,
                 });
             }
             #[cfg(feature = "embree")]
@@ -1026,6 +1099,121 @@ fn iso_mesh(
     Ok(mesh)
 }
 
+/// One plan's frames on a view: the whole run on the host, from the
+/// uniforms to the outputs in host memory (the GPU backend returns once they
+/// are downloaded). The frames reuse each other's arrays, as an interactive
+/// viewer's would.
+struct FrameRuns<'a> {
+    plan: &'a Plan,
+    library: &'a FunctorLibrary,
+    view: &'a SceneSetup,
+    pool: &'a rayon::ThreadPool,
+    gpu: Option<&'a GpuContext>,
+    elementwise: crate::CpuElementwise,
+    progress: &'a ProgressBar,
+    frame_pool: ColumnPool,
+}
+
+impl<'a> FrameRuns<'a> {
+    fn new(
+        plan: &'a Plan,
+        library: &'a FunctorLibrary,
+        view: &'a SceneSetup,
+        pool: &'a rayon::ThreadPool,
+        gpu: Option<&'a GpuContext>,
+        args: &BenchArgs,
+        progress: &'a ProgressBar,
+    ) -> FrameRuns<'a> {
+        FrameRuns {
+            plan,
+            library,
+            view,
+            pool,
+            gpu,
+            elementwise: args.cpu_elementwise,
+            progress,
+            frame_pool: ColumnPool::new(),
+        }
+    }
+
+    /// One frame and its wall time.
+    fn frame(&self, profile: bool) -> Result<(RunResult, Duration), Failure> {
+        let (plan, view) = (self.plan, self.view);
+        let start = Instant::now();
+        let result = match self.gpu {
+            None => {
+                let context = RunContext {
+                    library: self.library,
+                    uniforms: &view.uniforms,
+                    resources: &view.resources,
+                    chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
+                    column_pool: &self.frame_pool,
+                    elementwise: self.elementwise.into(),
+                };
+                self.pool.install(|| run_plan(plan, &context))
+            }
+            Some(gpu) => {
+                let context = GpuRunContext {
+                    gpu,
+                    library: self.library,
+                    uniforms: &view.uniforms,
+                    resources: &view.resources,
+                    profile,
+                };
+                self.pool.install(|| run_plan_gpu(plan, &context))
+            }
+        }
+        .map_err(|e| Failure::Run(format!("{}: {e}", plan.pipeline)))?;
+        let elapsed = start.elapsed();
+        self.progress.inc(1);
+        Ok((result, elapsed))
+    }
+
+    /// Gives a CPU frame's output arrays to the pool the next frames take
+    /// arrays from (the GPU backend allocates its own).
+    fn give_back(&self, result: RunResult) {
+        if self.gpu.is_some() {
+            return;
+        }
+        for (_, value) in result.outputs {
+            if let OutputValue::Array(column) = value {
+                self.frame_pool.give(column);
+            }
+        }
+    }
+}
+
+/// `--versus`: the warm-up and measured rounds of two plans in turn, a frame
+/// of each per round, the first of the two alternating from round to round
+/// so that neither always runs in the other's wake; returns each plan's
+/// measured frames, ms.
+fn measure_side_by_side(
+    own: &FrameRuns<'_>,
+    versus: &FrameRuns<'_>,
+    args: &BenchArgs,
+) -> Result<(Vec<f64>, Vec<f64>), Failure> {
+    let (mut own_ms, mut versus_ms) = (Vec::new(), Vec::new());
+    for round in 0..args.warmup + args.rounds {
+        let frame = |runs: &FrameRuns<'_>| -> Result<f64, Failure> {
+            let (result, elapsed) = runs.frame(false)?;
+            runs.give_back(result);
+            Ok(ms(elapsed))
+        };
+        let (own_frame, versus_frame) = if round % 2 == 0 {
+            let own_frame = frame(own)?;
+            (own_frame, frame(versus)?)
+        } else {
+            let versus_frame = frame(versus)?;
+            (frame(own)?, versus_frame)
+        };
+        if round >= args.warmup {
+            own_ms.push(own_frame);
+            versus_ms.push(versus_frame);
+        }
+    }
+    Ok((own_ms, versus_ms))
+}
+
 /// Runs `plan` for the warm-up and measured rounds; with `keep_prims`, also
 /// returns the `prim` and `depth` outputs of the last measured round. On the
 /// GPU (`gpu`), the measured rounds run without profiling (which would wait for
@@ -1042,40 +1230,7 @@ fn measure(
     progress: &ProgressBar,
     keep_prims: bool,
 ) -> Result<(Measurement, Option<Hits>), Failure> {
-    // The frames reuse each other's arrays, as an interactive viewer's would.
-    let frame_pool = ColumnPool::new();
-    // One frame: the whole run on the host, from the uniforms to the outputs in
-    // host memory (the GPU backend returns once they are downloaded).
-    let frame = |profile: bool| -> Result<(RunResult, Duration), Failure> {
-        let start = Instant::now();
-        let result = match gpu {
-            None => {
-                let context = RunContext {
-                    library,
-                    uniforms: &view.uniforms,
-                    resources: &view.resources,
-                    chunk: dpp_runtime::cpu::kernels::DEFAULT_CHUNK,
-                    column_pool: &frame_pool,
-                    elementwise: args.cpu_elementwise.into(),
-                };
-                pool.install(|| run_plan(plan, &context))
-            }
-            Some(gpu) => {
-                let context = GpuRunContext {
-                    gpu,
-                    library,
-                    uniforms: &view.uniforms,
-                    resources: &view.resources,
-                    profile,
-                };
-                pool.install(|| run_plan_gpu(plan, &context))
-            }
-        }
-        .map_err(|e| Failure::Run(format!("{}: {e}", plan.pipeline)))?;
-        let elapsed = start.elapsed();
-        progress.inc(1);
-        Ok((result, elapsed))
-    };
+    let runs = FrameRuns::new(plan, library, view, pool, gpu, args, progress);
     let mut measurement = Measurement {
         frames_ms: Vec::new(),
         first_frame_ms: 0.0,
@@ -1084,12 +1239,12 @@ fn measure(
     };
     let mut prims = None;
     for round in 0..args.warmup + args.rounds {
-        let (result, elapsed) = frame(false)?;
+        let (result, elapsed) = runs.frame(false)?;
         if round == 0 {
             measurement.first_frame_ms = ms(elapsed);
         }
         if round < args.warmup {
-            give_back_outputs(result, gpu, &frame_pool);
+            runs.give_back(result);
             continue;
         }
         measurement.frames_ms.push(ms(elapsed));
@@ -1115,29 +1270,16 @@ fn measure(
             }
         }
         // A viewer draws the next frame into the last one's images.
-        give_back_outputs(result, gpu, &frame_pool);
+        runs.give_back(result);
     }
     if gpu.is_some() {
         for _ in 0..args.rounds {
-            let (result, elapsed) = frame(true)?;
+            let (result, elapsed) = runs.frame(true)?;
             measurement.profiled_frames_ms.push(ms(elapsed));
             add_stages(&mut measurement.stages, &result.profile, args.rounds);
         }
     }
     Ok((measurement, prims))
-}
-
-/// Gives a CPU frame's output arrays to the pool the next frames take arrays
-/// from (the GPU backend allocates its own).
-fn give_back_outputs(result: RunResult, gpu: Option<&GpuContext>, frame_pool: &ColumnPool) {
-    if gpu.is_some() {
-        return;
-    }
-    for (_, value) in result.outputs {
-        if let OutputValue::Array(column) = value {
-            frame_pool.give(column);
-        }
-    }
 }
 
 /// Adds one run's stage times to the means over `rounds` runs.

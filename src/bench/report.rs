@@ -87,6 +87,21 @@ fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len().max(1) as f64
 }
 
+/// The median of `values` (the mean of the middle two for an even count).
+fn median(values: &[f64]) -> f64 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    match sorted.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => sorted[n / 2],
+        n => (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0,
+    }
+}
+
+fn minimum(values: &[f64]) -> f64 {
+    values.iter().copied().fold(f64::INFINITY, f64::min)
+}
+
 /// A table cell: [`Measurement::beyond_traversal_ns_per_pixel`], or `–`.
 fn beyond_traversal(measurement: &Measurement, pixels: u64) -> String {
     (measurement.beyond_traversal_ns_per_pixel(pixels))
@@ -364,6 +379,50 @@ impl Report {
         md.push('\n');
     }
 
+    /// `--versus`: both files' frames on every view and their ratio.
+    fn write_side_by_side(&self, md: &mut String) {
+        let rows: Vec<_> = (self.scenes.iter())
+            .flat_map(|scene| scene.views.iter().map(move |view| (scene, view)))
+            .filter_map(|(scene, view)| Some((scene, view, view.side_by_side.as_ref()?)))
+            .collect();
+        let Some((_, _, first)) = rows.first() else {
+            return;
+        };
+        let (own, versus) = (&first.own, &first.versus);
+        let _ = writeln!(
+            md,
+            "## `{versus}` against `{own}` (WORKLOAD{}), fused frame ms, side by side\n",
+            first.workload
+        );
+        let _ = writeln!(
+            md,
+            "Each round runs a frame of each file, one after the other (the first of the two alternating), after the warm-up rounds; a ratio is `{versus}`'s frame over `{own}`'s, and its median is over the rounds' ratios.\n"
+        );
+        let _ = writeln!(
+            md,
+            "| scene | view | `{own}` min | median | `{versus}` min | median | ratio: median | of the minima |"
+        );
+        let _ = writeln!(
+            md,
+            "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"
+        );
+        for (scene, view, pair) in rows {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.3} | {:.3} |",
+                scene.name,
+                view.view,
+                minimum(&pair.own_ms),
+                median(&pair.own_ms),
+                minimum(&pair.versus_ms),
+                median(&pair.versus_ms),
+                median(&pair.ratios()),
+                minimum(&pair.versus_ms) / minimum(&pair.own_ms)
+            );
+        }
+        md.push('\n');
+    }
+
     pub fn markdown(&self) -> String {
         let mut md = String::new();
         let (width, height) = self.size;
@@ -580,6 +639,7 @@ impl Report {
                 self.write_engine_frames(&mut md, workload);
             }
         }
+        self.write_side_by_side(&mut md);
 
         let _ = writeln!(
             md,
@@ -749,6 +809,15 @@ impl Report {
                                     "fused_over_workload1_intersect": over_intersect,
                                 })
                             }).collect::<Vec<_>>(),
+                            "side_by_side": view.side_by_side.as_ref().map(|pair| json!({
+                                "workload": pair.workload,
+                                "own": pair.own,
+                                "versus": pair.versus,
+                                "own_frames_ms": pair.own_ms,
+                                "versus_frames_ms": pair.versus_ms,
+                                "ratios": pair.ratios(),
+                                "median_ratio": median(&pair.ratios()),
+                            })),
                         })
                     })
                     .collect();

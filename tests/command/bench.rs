@@ -236,6 +236,64 @@ fn the_bvh_builder_is_chosen_and_reported() {
     }
 }
 
+/// `--versus`: the written-out WORKLOAD2 and workload2.dpp, a frame of each
+/// per round, in a table and in the JSON report.
+#[test]
+fn a_bench_versus_a_file_measures_both_frame_by_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let versus = crate::common::repo().join("pipelines/workload2_expressions.dpp");
+    let pipelines = pipelines();
+    #[rustfmt::skip]
+    let args = [
+        "bench", "builtin:16", "--size", "48x32", "--threads", "2",
+        "--pipelines", &pipelines, "--views", "front,back", "--workloads", "2",
+        "--warmup", "1", "--rounds", "3", "--versus", versus.to_str().unwrap(),
+        "--json", "bench.json",
+    ];
+    let output = dpp(&args, dir.path());
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    let stdout = text(&output.stdout);
+    assert!(
+        stdout.contains(
+            "## `workload2_expressions.dpp` against `workload2.dpp` (WORKLOAD2), fused frame ms, side by side"
+        ),
+        "{stdout}"
+    );
+    let rows = stdout
+        .lines()
+        .filter(|line| {
+            line.starts_with("| builtin:16 | front |") || line.starts_with("| builtin:16 | back |")
+        })
+        .filter(|line| line.split('|').count() == 10)
+        .count();
+    assert_eq!(rows, 2, "{stdout}");
+    let report = bench_json(dir.path());
+    for view in report["scenes"][0]["views"].as_array().unwrap() {
+        let pair = &view["side_by_side"];
+        assert_eq!(pair["workload"], 2);
+        assert_eq!(pair["versus"], "workload2_expressions.dpp");
+        let frames = |name: &str| -> Vec<f64> {
+            (pair[name].as_array().unwrap().iter())
+                .map(|v| v.as_f64().unwrap())
+                .collect()
+        };
+        let (own, versus, ratios) = (
+            frames("own_frames_ms"),
+            frames("versus_frames_ms"),
+            frames("ratios"),
+        );
+        // The measured rounds only: the warm-up round is not among them.
+        assert_eq!((own.len(), versus.len(), ratios.len()), (3, 3, 3));
+        for ((own, versus), ratio) in own.iter().zip(&versus).zip(&ratios) {
+            assert!(*own > 0.0 && *versus > 0.0);
+            assert!((ratio - versus / own).abs() < 1e-9);
+        }
+        let mut sorted = ratios.clone();
+        sorted.sort_by(f64::total_cmp);
+        assert_eq!(pair["median_ratio"].as_f64().unwrap(), sorted[1]);
+    }
+}
+
 #[test]
 fn bad_bench_input_is_exit_status_2() {
     let dir = tempfile::tempdir().unwrap();
@@ -254,6 +312,11 @@ fn bad_bench_input_is_exit_status_2() {
         (&["--embree-test", "fast"], "add embree to --engine"),
         (&["--embree-test", "exact"], "invalid value 'exact'"),
         (&["--bvh", "lbvh"], "invalid value 'lbvh'"),
+        (
+            &["--versus", "nowhere.dpp", "--workloads", "2"],
+            "--versus: cannot find nowhere.dpp",
+        ),
+        (&["--versus", "nowhere.dpp"], "name it alone in --workloads"),
     ];
     for (args, expected) in cases {
         let mut all: Vec<&str> = base.to_vec();
