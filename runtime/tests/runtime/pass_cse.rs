@@ -72,11 +72,11 @@ fn the_preludes_compaction_converts_keep_once() {
     op keep = map<lt>(values, %2)
     let dense: float = 1.0
     op %6 = map<toU32>(keep)
-    op slot = exclusiveScan<add>(%6)
-    op %10 = reduce<add>(%6)
-    let n: int = %10
+    op %7 = reduce<add>(%6)
+    let n: int = %7
     op at = iota(0)
     if float(n) < (dense * float(len(keep))) {
+      op slot = exclusiveScan<add>(%6)
       op %14 = iota(len(keep))
       op at = scatter(slot, %14, len: n, mask: keep)
     } else {

@@ -846,27 +846,20 @@ fn rule4_compaction_changes_the_length() {
     param n: int = 10
     let n: int = 10
     let dense: float = 1.0
-    stage 1 [iota → map<toF32> → fill → map<lt> → map<toU32> → exclusiveScan<add>] {
+    stage 1 [iota → map<toF32> → fill → map<lt> → map<toU32> → reduce<add>] {
       over n
       %1 = iota(n)
       x = map<toF32>(%1)
       %4 = fill(n, 4.5)
       keep = map<lt>(x, %4)
       %8 = map<toU32>(keep)
-      slot = exclusiveScan<add>(%8)
+      %9 = reduce<add>(%8)
       reads direct: -; indexed: -; uniform: n
-      materialises x: f32, keep: bool, %8: u32, slot: u32
-      ends at scan
-    }
-    stage 2 [reduce<add>] {
-      over n
-      %12 = reduce<add>(%8)
-      reads direct: %8: u32; indexed: -; uniform: -
-      materialises %12: int
+      materialises x: f32, keep: bool, %8: u32, %9: int
       ends at reduce result read by the host
     }
-    let n#1: int = %12
-    stage 3 [iota] {
+    let n#1: int = %9
+    stage 2 [iota] {
       over 0
       at = iota(0)
       reads direct: -; indexed: -; uniform: -
@@ -874,6 +867,13 @@ fn rule4_compaction_changes_the_length() {
       ends at control flow
     }
     if float(n#1) < (dense * float(len(keep))) {
+      stage 3 [exclusiveScan<add>] {
+        over n
+        slot = exclusiveScan<add>(%8)
+        reads direct: %8: u32; indexed: -; uniform: -
+        materialises slot: u32
+        ends at scan
+      }
       stage 4 [iota → scatter] {
         over n
         %16 = iota(len(keep))

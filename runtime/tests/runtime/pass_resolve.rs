@@ -245,7 +245,7 @@ fn use_of_the_prelude_from_another_folder() {
     loaded: app/main.dpp, app/../prelude.dpp
     pipeline compaction
     param n: int = 8
-    ops: iota, fill, map<lt>, map<toU32>, exclusiveScan<add>, reduce<add>, iota, iota, scatter, iota, gather
+    ops: iota, fill, map<lt>, map<toU32>, reduce<add>, iota, exclusiveScan<add>, iota, scatter, iota, gather
     outputs: kept
     "
     );
