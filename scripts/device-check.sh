@@ -12,7 +12,8 @@
 # recipe). The test binaries read the repository through the absolute path
 # they were built at (CARGO_MANIFEST_DIR); `run` links that path to its copy.
 # What `run` writes goes to $OUT: the test log, the bench tables (markdown and
-# JSON) and the adapter's name.
+# JSON; the written-out WORKLOAD2 side by side with the functor file among
+# them) and the adapter's name.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -99,6 +100,10 @@ run() {
         --markdown "$OUT/gpu-w12.md" --json "$OUT/gpu-w12.json" > /dev/null || status=1
     timeout 180 "$dpp" bench builtin --backend gpu --workloads 3 \
         --markdown "$OUT/gpu-w3.md" --json "$OUT/gpu-w3.json" > /dev/null || status=1
+    # The written-out WORKLOAD2 against the functor file, frame by frame.
+    timeout 120 "$dpp" bench builtin --backend gpu --workloads 2 \
+        --versus pipelines/workload2_expressions.dpp \
+        --markdown "$OUT/gpu-versus.md" --json "$OUT/gpu-versus.json" > /dev/null || status=1
     return $status
 }
 
