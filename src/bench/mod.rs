@@ -675,6 +675,12 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                     "error: across ranks dpp bench runs the CPU backend's engine only (no --engine embree, no --backend gpu)".into(),
                 ));
             }
+            if args.versus.is_some() {
+                return Err(Failure::Input(
+                    "error: --versus compares two files in one process; run it without mpirun"
+                        .into(),
+                ));
+            }
             across_ranks::bench_across_ranks(&args, &setup, library, &mut distribution)
         };
         let result = across();

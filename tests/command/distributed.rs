@@ -646,6 +646,20 @@ fn ranks_given_different_command_lines_fail_the_run() {
     check_failure(dir.path(), outcome, "command line differs");
 }
 
+/// `--versus` measures two files in one process: under mpirun it is bad input.
+#[test]
+fn bench_versus_under_mpirun_is_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let versus = pipeline("workload2_expressions.dpp");
+    #[rustfmt::skip]
+    let args = [
+        "bench", "sphere:24", "--size", "64x48", "--workloads", "2",
+        "--versus", &versus,
+    ];
+    let outcome = mpirun(dir.path(), 2, &args);
+    check_failure(dir.path(), outcome, "run it without mpirun");
+}
+
 /// `dpp bench` under mpirun reports every rank of every measurement: for
 /// each view, workload and schedule asked for, one row per rank with its
 /// triangles (which add up to the whole scene's), times, bytes and memory.
