@@ -1198,13 +1198,13 @@ fn measure_side_by_side(
     versus: &FrameRuns<'_>,
     args: &BenchArgs,
 ) -> Result<(Vec<f64>, Vec<f64>), Failure> {
+    let frame = |runs: &FrameRuns<'_>| -> Result<f64, Failure> {
+        let (result, elapsed) = runs.frame(false)?;
+        runs.give_back(result);
+        Ok(ms(elapsed))
+    };
     let (mut own_ms, mut versus_ms) = (Vec::new(), Vec::new());
     for round in 0..args.warmup + args.rounds {
-        let frame = |runs: &FrameRuns<'_>| -> Result<f64, Failure> {
-            let (result, elapsed) = runs.frame(false)?;
-            runs.give_back(result);
-            Ok(ms(elapsed))
-        };
         let (own_frame, versus_frame) = if round % 2 == 0 {
             let own_frame = frame(own)?;
             (own_frame, frame(versus)?)
