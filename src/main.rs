@@ -218,10 +218,12 @@ struct RunArgs {
 /// The BVH builders (`dpp_tracer::bvh::BvhBuilder`), by their command-line names.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub(crate) enum BvhChoice {
-    /// Top-down binned SAH (ours): the faster build and the cheaper tree.
+    /// Top-down binned SAH (ours): the cheapest tree to trace, and a fast build.
     Sah,
     /// obvhs' PLOC, with reinsertion and our collapse of its leaves.
     Ploc,
+    /// Karras' linear BVH (Morton codes, a radix sort, the radix tree): the fastest build; its trees trace up to a tenth slower.
+    Lbvh,
 }
 
 impl From<BvhChoice> for dpp_tracer::bvh::BvhBuilder {
@@ -229,6 +231,7 @@ impl From<BvhChoice> for dpp_tracer::bvh::BvhBuilder {
         match choice {
             BvhChoice::Sah => dpp_tracer::bvh::BvhBuilder::BinnedSah,
             BvhChoice::Ploc => dpp_tracer::bvh::BvhBuilder::Ploc,
+            BvhChoice::Lbvh => dpp_tracer::bvh::BvhBuilder::Lbvh,
         }
     }
 }

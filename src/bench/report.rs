@@ -255,6 +255,7 @@ impl Report {
         let own_build = match self.bvh {
             crate::BvhChoice::Sah => "our binned SAH build",
             crate::BvhChoice::Ploc => "obvhs's PLOC build and our flattening",
+            crate::BvhChoice::Lbvh => "the linear BVH: Morton codes, a radix sort, the radix tree",
         };
         let _ = writeln!(md, "Build: the BVH of the loaded mesh (dpp: {own_build}{embree}). Trace rate: WORKLOAD1's primary rays over its `map<intersect>` stage (unfused plan), mean over the views, with that BVH behind `intersect`.\n");
         let _ = writeln!(
@@ -288,6 +289,7 @@ impl Report {
             let own_bvh = match self.bvh {
                 crate::BvhChoice::Sah => "dpp (binned SAH)",
                 crate::BvhChoice::Ploc => "dpp (obvhs PLOC)",
+                crate::BvhChoice::Lbvh => "dpp (linear BVH)",
             };
             row(own_bvh, Some(scene.bvh_ms), own_rate);
             for (engine, bvh, build) in [

@@ -223,6 +223,7 @@ fn the_bvh_builder_is_chosen_and_reported() {
         (None, "| dpp (binned SAH) |"),
         (Some("sah"), "| dpp (binned SAH) |"),
         (Some("ploc"), "| dpp (obvhs PLOC) |"),
+        (Some("lbvh"), "| dpp (linear BVH) |"),
     ] {
         let mut more = vec!["--workloads", "1", "--json", "bench.json"];
         more.extend(choice.iter().flat_map(|choice| ["--bvh", choice]));
@@ -311,7 +312,7 @@ fn bad_bench_input_is_exit_status_2() {
         (&["--backend", "tpu"], "invalid value 'tpu'"),
         (&["--embree-test", "fast"], "add embree to --engine"),
         (&["--embree-test", "exact"], "invalid value 'exact'"),
-        (&["--bvh", "lbvh"], "invalid value 'lbvh'"),
+        (&["--bvh", "karras"], "invalid value 'karras'"),
         (
             &["--versus", "nowhere.dpp", "--workloads", "2"],
             "--versus: cannot find nowhere.dpp",

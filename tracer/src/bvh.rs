@@ -1,5 +1,6 @@
 //! The bounding volume hierarchy: built by our binned SAH build
-//! (`bvh/binned_sah.rs`, the default) or by obvhs' PLOC (flattened here), in
+//! (`bvh/binned_sah.rs`, the default), by obvhs' PLOC or as a linear BVH
+//! (`bvh/lbvh.rs`; both flattened here), in
 //! our own two-wide layout, traversed by our own code (the same layout feeds
 //! the GPU).
 //!
@@ -31,6 +32,7 @@ use rayon::prelude::*;
 mod binned_sah;
 mod depth_limit;
 mod huge_pages;
+mod lbvh;
 mod simd;
 mod wide;
 
@@ -98,6 +100,10 @@ pub enum BvhBuilder {
     /// Our top-down binned SAH build (`bvh/binned_sah.rs`).
     #[default]
     BinnedSah,
+    /// Karras' linear BVH (`bvh/lbvh.rs`): Morton codes, a radix sort, the
+    /// radix tree and the boxes bottom-up; the fastest build, and no surface
+    /// areas but in the leaves, so its trees trace a little slower.
+    Lbvh,
 }
 
 #[derive(Clone, Debug)]
@@ -174,7 +180,11 @@ impl Bvh {
     fn build_unscaled(mesh: &TriangleMesh, builder: BvhBuilder) -> Bvh {
         let binary = match builder {
             BvhBuilder::BinnedSah => binned_sah::binned_sah_tree(mesh),
-            BvhBuilder::Ploc => ploc_binary_tree(mesh),
+            BvhBuilder::Ploc => {
+                let tree = ploc_tree(mesh);
+                ploc_binary_tree(&tree.nodes, &tree.primitive_indices, mesh)
+            }
+            BvhBuilder::Lbvh => lbvh::lbvh_binary_tree(mesh),
         };
         Bvh::from_binary(binary, mesh)
     }
@@ -182,11 +192,11 @@ impl Bvh {
     /// Copies the triangles into leaf order (in parallel) and collapses the
     /// eight-wide tree.
     fn from_binary(binary: BinaryTree, mesh: &TriangleMesh) -> Bvh {
-        let mut triangles = huge_pages::vec_on_huge_pages(binary.triangle_ids.len());
-        triangles.par_extend(binary.triangle_ids.par_iter().map(|&id| {
-            let [v0, v1, v2] = mesh.triangle_vertices(id as usize).map(|v| v.to_array());
-            BvhTriangle { v0, v1, v2 }
-        }));
+        let triangles =
+            huge_pages::collect_on_huge_pages(binary.triangle_ids.par_iter().map(|&id| {
+                let [v0, v1, v2] = mesh.triangle_vertices(id as usize).map(|v| v.to_array());
+                BvhTriangle { v0, v1, v2 }
+            }));
         let wide = wide::WideBvh::build(&binary.nodes, &triangles);
         Bvh {
             nodes: binary.nodes,
@@ -590,15 +600,18 @@ fn ploc_tree(mesh: &TriangleMesh) -> Bvh2 {
     tree
 }
 
-/// [`ploc_tree`] flattened, with subtrees too deep for the stacks rebuilt.
-fn ploc_binary_tree(mesh: &TriangleMesh) -> BinaryTree {
-    let tree = ploc_tree(mesh);
-    let mut binary = flatten(&tree.nodes, &tree.primitive_indices);
+/// PLOC's tree flattened, with subtrees too deep for the stacks rebuilt.
+fn ploc_binary_tree(
+    nodes: &[Bvh2Node],
+    primitive_indices: &[u32],
+    mesh: &TriangleMesh,
+) -> BinaryTree {
+    let mut binary = flatten(nodes, primitive_indices);
     // Checked on the flattened tree: too deep a tree is rare (PLOC's chains
     // of tiny triangles), and finding out costs a walk of its own.
     if binary.stack_depth > MAX_STACK_DEPTH {
         if let Some((nodes, primitive_indices)) =
-            depth_limit::limit_depth(&tree.nodes, &tree.primitive_indices, mesh, MAX_STACK_DEPTH)
+            depth_limit::limit_depth(nodes, primitive_indices, mesh, MAX_STACK_DEPTH)
         {
             binary = flatten(&nodes, &primitive_indices);
         }
@@ -642,6 +655,22 @@ const MAX_LEAF_TRIANGLES: u32 = 8;
 /// The cost of a node visit against a triangle test in the collapse's SAH
 /// (obvhs' presets' `collapse_traversal_cost`).
 const COLLAPSE_TRAVERSAL_COST: f32 = 3.0;
+
+/// Whether two sibling leaves (boxes and triangle counts; a count of 0 is an
+/// inner node) become one leaf of their parent's box: when they hold at most
+/// [`MAX_LEAF_TRIANGLES`] together and the SAH says one leaf costs no more
+/// than their parent and two leaves (obvhs' collapse rule).
+fn collapses_into_one_leaf(parent: &Aabb, left: (Aabb, u32), right: (Aabb, u32)) -> bool {
+    let ((left_box, left_count), (right_box, right_count)) = (left, right);
+    let count = left_count + right_count;
+    if left_count == 0 || right_count == 0 || count > MAX_LEAF_TRIANGLES {
+        return false;
+    }
+    let as_one_leaf = parent.half_area() * (count as f32 - COLLAPSE_TRAVERSAL_COST);
+    let as_two_leaves =
+        left_box.half_area() * left_count as f32 + right_box.half_area() * right_count as f32;
+    as_one_leaf <= as_two_leaves
+}
 
 /// A flattened subtree: a leaf of triangles `first .. first + count` (leaf
 /// order), or our inner node (numbered in post-order until the end).
@@ -825,13 +854,16 @@ fn walk(
             },
         ) = (left, right)
         {
-            let count = left_count + right_count;
-            let as_one_leaf = node.aabb().half_area() * (count as f32 - COLLAPSE_TRAVERSAL_COST);
-            let as_two_leaves = sources[0].aabb().half_area() * left_count as f32
-                + sources[1].aabb().half_area() * right_count as f32;
             // The two leaves' triangles are consecutive in leaf order.
-            if count <= MAX_LEAF_TRIANGLES && as_one_leaf <= as_two_leaves {
-                done.push(Flattened::Leaf { first, count });
+            if collapses_into_one_leaf(
+                node.aabb(),
+                (*sources[0].aabb(), left_count),
+                (*sources[1].aabb(), right_count),
+            ) {
+                done.push(Flattened::Leaf {
+                    first,
+                    count: left_count + right_count,
+                });
                 continue;
             }
         }

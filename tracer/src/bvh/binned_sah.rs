@@ -12,7 +12,7 @@
 //! boxes are exact in any order, counts are integers, and each node's costs are
 //! summed on one thread.
 
-use super::huge_pages::vec_on_huge_pages;
+use super::huge_pages::{collect_on_huge_pages, vec_on_huge_pages};
 use super::{
     binary_child, root_first, splice, BinaryTree, BvhNode, Flattened, COLLAPSE_TRAVERSAL_COST,
     MAX_LEAF_TRIANGLES, MAX_STACK_DEPTH,
@@ -25,8 +25,7 @@ use rayon::prelude::*;
 /// The binary tree of a (validated) mesh, leaves in depth-first order.
 pub(super) fn binned_sah_tree(mesh: &TriangleMesh) -> BinaryTree {
     let count = mesh.triangles.len();
-    let mut references = vec_on_huge_pages(count);
-    references.par_extend((0..count as u32).into_par_iter().map(|id| {
+    let mut references = collect_on_huge_pages((0..count as u32).into_par_iter().map(|id| {
         let vertices = mesh.triangle_vertices(id as usize).map(Vec3A::from);
         let bounds = Aabb::from_points(&vertices);
         PrimitiveReference {
@@ -35,8 +34,7 @@ pub(super) fn binned_sah_tree(mesh: &TriangleMesh) -> BinaryTree {
         }
     }));
     let root = bounds_of(&references);
-    let mut scratch = vec_on_huge_pages(count);
-    scratch.par_extend(references.par_iter().copied());
+    let mut scratch = collect_on_huge_pages(references.par_iter().copied());
     let whole = NodeReferences {
         held: &mut references,
         spare: &mut scratch,

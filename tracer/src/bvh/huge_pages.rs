@@ -21,6 +21,16 @@ pub(super) fn vec_on_huge_pages<T>(capacity: usize) -> Vec<T> {
     vector
 }
 
+/// The items of a parallel iterator collected, in order, into a vector on huge
+/// pages ([`vec_on_huge_pages`]).
+pub(super) fn collect_on_huge_pages<T: Send>(
+    items: impl rayon::iter::IndexedParallelIterator<Item = T>,
+) -> Vec<T> {
+    let mut vector = vec_on_huge_pages(items.len());
+    rayon::iter::ParallelExtend::par_extend(&mut vector, items);
+    vector
+}
+
 #[cfg(target_os = "linux")]
 fn advise_huge_pages(start: usize, bytes: usize) {
     const PAGE: usize = 4096;

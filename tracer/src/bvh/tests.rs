@@ -152,7 +152,7 @@ fn random_rays(random: &mut SplitMix64, count: usize, mesh: &TriangleMesh) -> Ve
 }
 
 /// Every builder, for the tests that hold for each.
-const BUILDERS: [BvhBuilder; 2] = [BvhBuilder::BinnedSah, BvhBuilder::Ploc];
+const BUILDERS: [BvhBuilder; 3] = [BvhBuilder::BinnedSah, BvhBuilder::Ploc, BvhBuilder::Lbvh];
 
 #[test]
 fn matches_brute_force_on_a_random_soup() {
@@ -1370,4 +1370,63 @@ fn a_tree_plocs_too_deep_keeps_what_fits_and_still_matches_brute_force() {
     }
     // Rays at the chain's tiniest triangles.
     check_rays_at_the_chain(&bvh, &mesh, [40, 80, 119]);
+}
+
+#[test]
+fn a_linear_bvh_of_one_chain_of_keys_reaches_the_stack_depth_and_no_further() {
+    // 12 800 triangles: keys of 14 index bits and 16 Morton bits per axis.
+    // Tiny triangles whose centres lie at 2^k cells along each axis (k =
+    // 0..16) have the 48 single-bit codes, whose radix tree is one chain, and
+    // 256 copies at each point add eight levels of ties (less the three that
+    // leaves of eight take). A linear BVH is no deeper than its 64 key bits,
+    // which the stacks hold.
+    let axis_bits = 16;
+    let epsilon = 0.5f32.powi(22);
+    let mut points = vec![Vec3::ZERO, Vec3::ONE];
+    for k in 0..axis_bits {
+        let at = 0.5f32.powi(axis_bits - k);
+        points.extend([Vec3::X * at, Vec3::Y * at, Vec3::Z * at]);
+    }
+    let mut positions = Vec::new();
+    let mut triangles = Vec::new();
+    for &point in &points {
+        for _ in 0..256 {
+            let base = positions.len() as u32;
+            positions.extend([point, point + Vec3::X * epsilon, point + Vec3::Y * epsilon]);
+            triangles.push([base, base + 1, base + 2]);
+        }
+    }
+    let mesh = TriangleMesh {
+        positions,
+        triangles,
+        normals: None,
+        scalars: None,
+    };
+    let bvh = Bvh::build_with(&mesh, BvhBuilder::Lbvh).unwrap();
+    check_structure(&bvh, &mesh);
+    let depth = bvh.stack_depth();
+    assert!((50..=MAX_STACK_DEPTH).contains(&depth), "{depth}");
+    for &point in &points {
+        for direction in [-Vec3::Z, -Vec3::X] {
+            let ray = Ray {
+                origin: point + Vec3::new(0.25, 0.25, 0.0) * epsilon - direction,
+                direction,
+                tmax: f32::INFINITY,
+            };
+            check_against_brute_force(&bvh, &mesh, &ray);
+        }
+    }
+}
+
+#[test]
+fn a_linear_bvh_costs_more_than_the_binned_sah_tree_but_not_without_bound() {
+    // The linear BVH never looks at areas: on the built-in scene its tree
+    // costs more by the SAH than the binned build's, within a factor of two.
+    let mesh = builtin_scene(64).unwrap();
+    let binned = sah_cost(&Bvh::build_with(&mesh, BvhBuilder::BinnedSah).unwrap());
+    let linear = sah_cost(&Bvh::build_with(&mesh, BvhBuilder::Lbvh).unwrap());
+    assert!(
+        binned < linear && linear < 2.0 * binned,
+        "binned SAH {binned} against linear {linear}"
+    );
 }

@@ -16,7 +16,7 @@
 //! shared edge or vertex, or overlapping copies of a surface, as CAD meshes have)
 //! every traversal keeps the one with the lowest leaf-order index.
 
-use super::huge_pages::vec_on_huge_pages;
+use super::huge_pages::{collect_on_huge_pages, vec_on_huge_pages};
 use super::simd::{Lanes, Lanes8, LanesExt, Portable};
 use super::{Bvh, BvhChild, BvhNode, BvhTriangle, PreparedRay, Ray, ROBUST_FAR_SCALE};
 use packet::{is_packet, packet_key, single_rays_below, trace_packet, PacketStack, MAX_PACKET};
@@ -129,8 +129,7 @@ impl WideBvh {
             root.set_lane_box(lane, child);
         }
         wide_nodes[0] = root;
-        let mut filled = vec_on_huge_pages(groups.len());
-        filled.par_extend(groups.par_iter().map(|place| place.fill(triangles)));
+        let filled = collect_on_huge_pages(groups.par_iter().map(|place| place.fill(triangles)));
         let wide = WideBvh {
             nodes: wide_nodes,
             groups: filled,
