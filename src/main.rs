@@ -222,7 +222,7 @@ pub(crate) enum BvhChoice {
     Sah,
     /// obvhs' PLOC, with reinsertion and our collapse of its leaves.
     Ploc,
-    /// Karras' linear BVH (Morton codes, a radix sort, the radix tree): the fastest build; its trees trace up to a tenth slower.
+    /// Karras' linear BVH (Morton codes, a radix sort, the radix tree): the fastest build; its trees trace at 0.72-1.0 of the SAH trees' rate (docs/benchmarks.md).
     Lbvh,
 }
 
