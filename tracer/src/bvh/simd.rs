@@ -17,6 +17,9 @@ pub(super) trait Lanes: Copy {
     type F: Copy;
     fn splat(self, x: f32) -> Self::F;
     fn load_at(self, row: &[f32; 16], offset: usize) -> Self::F;
+    /// Lane `i` is `value(i)`, assembled in registers: a row of scalars just
+    /// stored and loaded back as one vector would wait for the stores.
+    fn lanes_of(self, value: impl Fn(usize) -> f32) -> Self::F;
     fn store_at(self, x: Self::F, row: &mut [f32; 16], offset: usize);
     fn add(self, a: Self::F, b: Self::F) -> Self::F;
     fn sub(self, a: Self::F, b: Self::F) -> Self::F;
@@ -93,6 +96,10 @@ impl Lanes for Portable {
     #[inline(always)]
     fn load_at(self, row: &[f32; 16], offset: usize) -> [f32; 8] {
         std::array::from_fn(|i| row[offset + i])
+    }
+    #[inline(always)]
+    fn lanes_of(self, value: impl Fn(usize) -> f32) -> [f32; 8] {
+        std::array::from_fn(value)
     }
     #[inline(always)]
     fn store_at(self, x: [f32; 8], row: &mut [f32; 16], offset: usize) {
@@ -224,6 +231,21 @@ mod x86 {
             fn load_at(self, row: &[f32; 16], offset: usize) -> __m256 {
                 assert!(offset <= 8);
                 unsafe { _mm256_loadu_ps(row.as_ptr().add(offset)) }
+            }
+            #[inline(always)]
+            fn lanes_of(self, value: impl Fn(usize) -> f32) -> __m256 {
+                unsafe {
+                    _mm256_setr_ps(
+                        value(0),
+                        value(1),
+                        value(2),
+                        value(3),
+                        value(4),
+                        value(5),
+                        value(6),
+                        value(7),
+                    )
+                }
             }
             #[inline(always)]
             fn store_at(self, x: __m256, row: &mut [f32; 16], offset: usize) {
@@ -396,6 +418,29 @@ mod x86 {
         fn load_at(self, row: &[f32; 16], offset: usize) -> __m512 {
             assert!(offset == 0);
             unsafe { _mm512_loadu_ps(row.as_ptr()) }
+        }
+        #[inline(always)]
+        fn lanes_of(self, value: impl Fn(usize) -> f32) -> __m512 {
+            unsafe {
+                _mm512_setr_ps(
+                    value(0),
+                    value(1),
+                    value(2),
+                    value(3),
+                    value(4),
+                    value(5),
+                    value(6),
+                    value(7),
+                    value(8),
+                    value(9),
+                    value(10),
+                    value(11),
+                    value(12),
+                    value(13),
+                    value(14),
+                    value(15),
+                )
+            }
         }
         #[inline(always)]
         fn store_at(self, x: __m512, row: &mut [f32; 16], offset: usize) {

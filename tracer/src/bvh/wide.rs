@@ -68,10 +68,14 @@ struct TriangleGroup {
     last: bool,
 }
 
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub(super) struct WideBvh {
     nodes: Vec<WideNode>,
     groups: Vec<TriangleGroup>,
+    /// The root's children's boxes together, as `[min x, min y, min z, max x,
+    /// max y, max z]`: each plane is one of theirs, so a ray whose slab test
+    /// rejects it rejects every box in the tree.
+    bounds: [f32; 6],
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -131,6 +135,7 @@ impl WideBvh {
         wide_nodes[0] = root;
         let filled = collect_on_huge_pages(groups.par_iter().map(|place| place.fill(triangles)));
         let wide = WideBvh {
+            bounds: root.union_of_children(),
             nodes: wide_nodes,
             groups: filled,
         };
@@ -302,6 +307,19 @@ impl WideNode {
             self.planes[3 + axis][lane] = child.max[axis];
         }
         self.valid |= 1 << lane;
+    }
+
+    /// The planes of the box around every valid child (inverted if there is none).
+    fn union_of_children(&self) -> [f32; 6] {
+        std::array::from_fn(|plane| {
+            let lanes = (0..WIDTH).filter(|lane| self.valid & 1 << lane != 0);
+            let values = lanes.map(|lane| self.planes[plane][lane]);
+            if plane < 3 {
+                values.fold(f32::INFINITY, f32::min)
+            } else {
+                values.fold(f32::NEG_INFINITY, f32::max)
+            }
+        })
     }
 
     fn empty() -> WideNode {
@@ -872,26 +890,52 @@ fn walk<
 /// and their entry distances.
 #[inline(always)]
 fn boxes<S: Lanes8>(lanes: S, ray: &BoxRay<S>, node: &WideNode, closest: f32) -> (u32, S::F) {
+    // No closures around intrinsics: see `LanesExt`.
+    let [nx, ny, nz] = ray.near_plane;
+    let [fx, fy, fz] = ray.far_plane;
+    let near = [
+        lanes.load(&node.planes[nx]),
+        lanes.load(&node.planes[ny]),
+        lanes.load(&node.planes[nz]),
+    ];
+    let far = [
+        lanes.load(&node.planes[fx]),
+        lanes.load(&node.planes[fy]),
+        lanes.load(&node.planes[fz]),
+    ];
+    let (entered, t_enter) = slab_test(
+        lanes,
+        [near, far],
+        &ray.origin,
+        &ray.inverse_direction,
+        lanes.splat(closest),
+    );
+    (entered & node.valid, t_enter)
+}
+
+/// The slab test lane by lane, each lane a box (`[near, far]` planes per
+/// axis) and a ray, with the scalar test's IEEE operations: the lanes whose
+/// ray enters the box before `closest` (with the robust test's margin), and
+/// the entry distances. Eight boxes and one ray, or one box and a packet.
+#[inline(always)]
+pub(super) fn slab_test<L: Lanes>(
+    lanes: L,
+    [near, far]: [[L::F; 3]; 2],
+    origin: &[L::F; 3],
+    inverse_direction: &[L::F; 3],
+    closest: L::F,
+) -> (u32, L::F) {
     let mut t_enter = lanes.splat(0.0);
-    let mut t_exit = lanes.splat(closest);
+    let mut t_exit = closest;
     for axis in 0..3 {
-        let near = lanes.load(&node.planes[ray.near_plane[axis]]);
-        let far = lanes.load(&node.planes[ray.far_plane[axis]]);
-        let t_near = lanes.mul(
-            lanes.sub(near, ray.origin[axis]),
-            ray.inverse_direction[axis],
-        );
-        let t_far = lanes.mul(
-            lanes.sub(far, ray.origin[axis]),
-            ray.inverse_direction[axis],
-        );
+        let t_near = lanes.mul(lanes.sub(near[axis], origin[axis]), inverse_direction[axis]);
+        let t_far = lanes.mul(lanes.sub(far[axis], origin[axis]), inverse_direction[axis]);
         // NaN leaves the accumulators unchanged, as in the scalar test.
         t_enter = lanes.max_or_second(t_near, t_enter);
         t_exit = lanes.min_or_second(t_far, t_exit);
     }
     let limit = lanes.mul(t_exit, lanes.splat(ROBUST_FAR_SCALE));
-    let entered =
-        lanes.le(t_enter, limit) & lanes.lt(t_enter, lanes.splat(f32::INFINITY)) & node.valid;
+    let entered = lanes.le(t_enter, limit) & lanes.lt(t_enter, lanes.splat(f32::INFINITY));
     (entered, t_enter)
 }
 

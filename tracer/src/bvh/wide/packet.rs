@@ -6,10 +6,17 @@
 //! traffic and control flow. Where few rays of the packet remain in a subtree,
 //! they finish it one by one with the single-ray walk, which tests eight boxes
 //! or sixteen triangles at once instead. An any-hit lane leaves the packet at
-//! its first hit. Below its first two inner nodes a packet first tests the
-//! eight children's boxes against its frustum (the range of its rays' origins
-//! and inverse directions) and tests only the children that pass it ray by
-//! ray: most children of a deep node are missed by every ray of the packet.
+//! its first hit.
+//!
+//! Culling before the ray-by-ray tests, each conservative:
+//! - a packet none of whose rays enters the tree's box ends at once;
+//! - a packet tests a node's eight children's boxes against its frustum (the
+//!   range of its rays' origins and inverse directions, up to its farthest
+//!   closest hit so far) and tests only the children that pass ray by ray,
+//!   nearest first by the frustum's entry distance;
+//! - at a leaf, it tests the triangles' own boxes against the frustum the same
+//!   way, and only those that pass ray by ray (a leaf holds up to sixteen
+//!   triangles, and a packet of a zoomed view's pixels sees a few of them).
 //!
 //! Each lane does the scalar tests' IEEE operations on its own ray, so distances,
 //! culling and hits per ray are exactly those of the single-ray traversal; ties
@@ -17,16 +24,9 @@
 
 use super::super::simd::{Lanes, Lanes8, LanesExt};
 use super::{
-    planes, walk, watertight, Bvh, Found, PreparedRay, Ray, Stack, Walk, WideNode, LEAF, NO_HIT,
-    ROBUST_FAR_SCALE, STACK_ENTRIES, WIDTH,
+    planes, slab_test, walk, watertight, Bvh, Found, PreparedRay, Ray, Stack, TriangleGroup, Walk,
+    WideNode, GROUP, LEAF, NO_HIT, ROBUST_FAR_SCALE, STACK_ENTRIES, WIDTH,
 };
-
-/// Inner nodes a packet visits before it culls children by its [`Frustum`]:
-/// near the root most children are entered, and a packet that leaves early
-/// (rays that miss the scene) would pay for the frustum and gain nothing
-/// (measured: from the third node on is 0-11% faster than from the first,
-/// which is slower on the bunny's front view).
-const FRUSTUM_AFTER: u32 = 2;
 
 /// The widest packet (AVX-512: 16 rays).
 pub(super) const MAX_PACKET: usize = 16;
@@ -133,23 +133,26 @@ fn traverse_packet<
     // The packet's constants, as `PreparedRay::new` computes them per ray;
     // lanes without a ray (any-hit packets may be short) stay zero and are
     // never active, so no test's mask takes them.
-    let mut rows = [[0.0f32; MAX_PACKET]; 7];
-    for (lane, ray) in rays.iter().enumerate() {
-        for axis in 0..3 {
-            rows[axis][lane] = ray.origin[axis];
-            rows[3 + axis][lane] = ray.direction[axis];
-        }
-        rows[6][lane] = ray.tmax;
+    // A macro, not a closure: see `LanesExt`.
+    macro_rules! row {
+        ($ray:ident => $value:expr) => {
+            lanes.lanes_of(|lane| rays.get(lane).map_or(0.0, |$ray| $value))
+        };
     }
-    let origin = [
-        lanes.load_row(&rows[0]),
-        lanes.load_row(&rows[1]),
-        lanes.load_row(&rows[2]),
-    ];
+    let origin = if ANY_HIT {
+        [
+            row!(ray => ray.origin.x),
+            row!(ray => ray.origin.y),
+            row!(ray => ray.origin.z),
+        ]
+    } else {
+        // One origin (`is_packet`).
+        lanes.splat3(rays[0].origin.to_array())
+    };
     let direction = [
-        lanes.load_row(&rows[3]),
-        lanes.load_row(&rows[4]),
-        lanes.load_row(&rows[5]),
+        row!(ray => ray.direction.x),
+        row!(ray => ray.direction.y),
+        row!(ray => ray.direction.z),
     ];
     let one = lanes.splat(1.0);
     let inverse_direction = [
@@ -157,28 +160,55 @@ fn traverse_packet<
         lanes.div(one, direction[1]),
         lanes.div(one, direction[2]),
     ];
-    let shear = [
-        lanes.div(direction[KX], direction[KZ]),
-        lanes.div(direction[KY], direction[KZ]),
-        lanes.div(one, direction[KZ]),
-    ];
     // The packet's rays share their direction signs.
     let [near_plane, far_plane] = planes(rays[0].direction.to_array().map(f32::is_sign_negative));
-    let mut frustum = None;
-    let mut inner_nodes_visited = 0;
 
-    let mut closest = lanes.load_row(&rows[6]);
+    let mut closest = row!(ray => ray.tmax);
     let zero = lanes.splat(0.0);
     // The best hits' barycentrics.
     let (mut hit_u, mut hit_v) = (zero, zero);
     let mut best = [NO_HIT; MAX_PACKET];
     let scale = lanes.splat(ROBUST_FAR_SCALE);
-    let infinity = lanes.splat(f32::INFINITY);
+    let box_rays = PacketBoxTest {
+        origin,
+        inverse_direction,
+        near_plane,
+        far_plane,
+    };
 
     let wide = &bvh.wide;
     let mut stack_len = 0usize;
     let mut current = 0u32;
-    let mut active = (1u32 << rays.len()) - 1;
+    // Rays that miss the tree's box miss every box in it (`WideBvh::bounds`):
+    // where the mesh leaves most of the frame empty, most packets end here,
+    // before the root's eight children are tested ray by ray.
+    let mut active = box_rays
+        .enter(
+            lanes,
+            |plane| wide.bounds[plane],
+            closest,
+            (1u32 << rays.len()) - 1,
+        )
+        .0;
+    if active == 0 {
+        found[..rays.len()].fill(None);
+        return;
+    }
+    let mut frustum = Frustum::new(
+        boxes,
+        lanes,
+        rays,
+        // Closest-hit packets share their origin (`is_packet`).
+        !ANY_HIT,
+        &origin,
+        &inverse_direction,
+        closest,
+    );
+    let shear = [
+        lanes.div(direction[KX], direction[KZ]),
+        lanes.div(direction[KY], direction[KZ]),
+        lanes.div(one, direction[KZ]),
+    ];
     // Any hit: the lanes that have found one, and left the packet.
     let mut done = 0u32;
     'visit: loop {
@@ -218,52 +248,23 @@ fn traverse_packet<
             closest = lanes.load_row(&closest_row);
             hit_u = lanes.load_row(&u_row);
             hit_v = lanes.load_row(&v_row);
+            frustum.farthest = lanes.greatest(closest);
         } else if current & LEAF == 0 {
             let node = &wide.nodes[current as usize];
             let mut entered = [(0u32, 0u32, 0.0f32); WIDTH];
-            let mut t_entry = [[0.0f32; MAX_PACKET]; WIDTH];
+            let mut t_entry = [zero; WIDTH];
             let mut count = 0;
-            inner_nodes_visited += 1;
-            let mut children = node.valid;
-            if inner_nodes_visited > FRUSTUM_AFTER {
-                // No closure: see `LanesExt`.
-                if frustum.is_none() {
-                    frustum = Some(Frustum::new(
-                        boxes,
-                        lanes,
-                        rays,
-                        // Closest-hit packets share their origin (`is_packet`).
-                        !ANY_HIT,
-                        &origin,
-                        &inverse_direction,
-                    ));
-                }
-                if let Some(frustum) = &frustum {
-                    children = frustum.children_entered(boxes, node);
-                }
-            }
+            // Children are taken nearest first by the frustum's entry distance
+            // (a bound on their rays', as Embree orders a coherent packet's).
+            let (mut children, frustum_entry) = frustum.children_entered(boxes, node);
             while children != 0 {
                 let child = children.trailing_zeros() as usize;
                 children &= children - 1;
-                let mut t_enter = zero;
-                let mut t_exit = closest;
-                for axis in 0..3 {
-                    let near = lanes.splat(node.planes[near_plane[axis]][child]);
-                    let far = lanes.splat(node.planes[far_plane[axis]][child]);
-                    let t_near = lanes.mul(lanes.sub(near, origin[axis]), inverse_direction[axis]);
-                    let t_far = lanes.mul(lanes.sub(far, origin[axis]), inverse_direction[axis]);
-                    // NaN leaves the accumulators unchanged, as in the scalar test.
-                    t_enter = lanes.max_or_second(t_near, t_enter);
-                    t_exit = lanes.min_or_second(t_far, t_exit);
-                }
-                let rays_in = lanes.le(t_enter, lanes.mul(t_exit, scale))
-                    & lanes.lt(t_enter, infinity)
-                    & active;
+                let (rays_in, t_enter) =
+                    box_rays.enter(lanes, |plane| node.planes[plane][child], closest, active);
                 if rays_in != 0 {
-                    lanes.store_at(t_enter, &mut t_entry[count], 0);
-                    // Ordered by the entry distance of the first ray in.
-                    let key = t_entry[count][rays_in.trailing_zeros() as usize];
-                    entered[count] = (node.children[child], rays_in, key);
+                    t_entry[count] = t_enter;
+                    entered[count] = (node.children[child], rays_in, frustum_entry[child]);
                     count += 1;
                 }
             }
@@ -280,7 +281,7 @@ fn traverse_packet<
                 }
                 for &i in &order[..count - 1] {
                     stack.entries[stack_len] = (entered[i].0, entered[i].1);
-                    stack.t_entry[stack_len] = t_entry[i];
+                    lanes.store_at(t_entry[i], &mut stack.t_entry[stack_len], 0);
                     stack_len += 1;
                 }
                 let nearest = order[count - 1];
@@ -290,9 +291,12 @@ fn traverse_packet<
             }
         } else {
             let mut group_index = (current & !LEAF) as usize;
+            // Whether some ray's closest hit came nearer: the frustum's far
+            // bound follows the packet's farthest closest hit.
+            let mut closer_in_leaf = false;
             'groups: loop {
                 let group = &wide.groups[group_index];
-                let mut triangles = group.valid;
+                let mut triangles = frustum.triangles_entered(boxes, group);
                 while triangles != 0 {
                     let lane = triangles.trailing_zeros() as usize;
                     triangles &= triangles - 1;
@@ -343,12 +347,16 @@ fn traverse_packet<
                         let (u, v) = crossing.barycentrics(lanes);
                         hit_u = lanes.select(taken, u, hit_u);
                         hit_v = lanes.select(taken, v, hit_v);
+                        closer_in_leaf = true;
                     }
                 }
                 if group.last {
                     break;
                 }
                 group_index += 1;
+            }
+            if closer_in_leaf {
+                frustum.farthest = lanes.greatest(closest);
             }
         }
         let limit = lanes.mul(closest, scale);
@@ -391,6 +399,39 @@ fn traverse_packet<
     }
 }
 
+/// The packet's slab test of one box, ray by ray exactly as the scalar test.
+struct PacketBoxTest<T: Lanes> {
+    origin: [T::F; 3],
+    inverse_direction: [T::F; 3],
+    near_plane: [usize; 3],
+    far_plane: [usize; 3],
+}
+
+impl<T: Lanes> PacketBoxTest<T> {
+    /// The `active` rays that enter the box whose plane `p` (a row of
+    /// [`WideNode::planes`]) is `plane(p)` before their `closest`, and every
+    /// lane's entry distance.
+    #[inline(always)]
+    fn enter(
+        &self,
+        lanes: T,
+        plane: impl Fn(usize) -> f32,
+        closest: T::F,
+        active: u32,
+    ) -> (u32, T::F) {
+        let near = self.near_plane.map(&plane);
+        let far = self.far_plane.map(plane);
+        let (entered, t_enter) = slab_test(
+            lanes,
+            [lanes.splat3(near), lanes.splat3(far)],
+            &self.origin,
+            &self.inverse_direction,
+            closest,
+        );
+        (entered & active, t_enter)
+    }
+}
+
 /// What the packet's rays have in common, to see, for eight children at once,
 /// which of them no ray of the packet can enter: per axis the range of the
 /// rays' origins and of their inverse directions (of one sign). A ray's slab
@@ -409,7 +450,8 @@ struct Frustum<S: Lanes> {
     inverse_high: [S::F; 3],
     near_plane: [usize; 3],
     far_plane: [usize; 3],
-    /// The packet's largest `tmax`: no ray's closest hit is farther.
+    /// The packet's farthest closest hit so far (at first its largest
+    /// `tmax`): no ray's closest hit is farther.
     farthest: f32,
 }
 
@@ -422,6 +464,7 @@ impl<S: Lanes8> Frustum<S> {
         one_origin: bool,
         origin: &[T::F; 3],
         inverse_direction: &[T::F; 3],
+        closest: T::F,
     ) -> Frustum<S> {
         let negative = rays[0].direction.to_array().map(f32::is_sign_negative);
         let [near_plane, far_plane] = planes(negative);
@@ -434,7 +477,7 @@ impl<S: Lanes8> Frustum<S> {
             inverse_high: [zero; 3],
             near_plane,
             far_plane,
-            farthest: rays.iter().fold(0.0f32, |bound, ray| bound.max(ray.tmax)),
+            farthest: packet_lanes.greatest(closest),
         };
         let lanes_in_use = (1u32 << rays.len()) - 1;
         let whole = rays.len() == T::N;
@@ -483,23 +526,66 @@ impl<S: Lanes8> Frustum<S> {
     }
 
     /// The children of `node` some ray of the packet may enter before its
-    /// `tmax`.
+    /// `tmax`, and a bound below each one's rays' entry distances.
     #[inline(always)]
-    fn children_entered(&self, lanes: S, node: &WideNode) -> u32 {
+    fn children_entered(&self, lanes: S, node: &WideNode) -> (u32, [f32; 8]) {
+        // No closures around intrinsics: see `LanesExt`.
+        let planes = [
+            lanes.load(&node.planes[0]),
+            lanes.load(&node.planes[1]),
+            lanes.load(&node.planes[2]),
+            lanes.load(&node.planes[3]),
+            lanes.load(&node.planes[4]),
+            lanes.load(&node.planes[5]),
+        ];
+        let (entered, t_enter) = self.boxes_entered(lanes, &planes);
+        (entered & node.valid, lanes.store(t_enter))
+    }
+
+    /// The triangles of `group` some ray of the packet may hit: those whose
+    /// bounding boxes it may enter. Each box is a leaf's box, had the leaf held
+    /// that triangle alone, so the robust box test's guarantee holds for it: a
+    /// ray that hits the triangle enters its box. Where a leaf spans several
+    /// pixels' worth of small triangles, most are outside a packet's frustum.
+    #[inline(always)]
+    fn triangles_entered(&self, lanes: S, group: &TriangleGroup) -> u32 {
+        let mut entered = 0;
+        for half in 0..GROUP / 8 {
+            let lanes_in_half = group.valid >> (8 * half) & 0xff;
+            if lanes_in_half == 0 {
+                break;
+            }
+            let corner = |vertex: usize, axis: usize| -> &[f32; 8] {
+                group.v[vertex][axis][8 * half..8 * half + 8]
+                    .try_into()
+                    .expect("eight lanes")
+            };
+            let mut planes = [lanes.splat(0.0); 6];
+            for axis in 0..3 {
+                let a = lanes.load(corner(0, axis));
+                let b = lanes.load(corner(1, axis));
+                let c = lanes.load(corner(2, axis));
+                planes[axis] = lanes.min_or_second(lanes.min_or_second(a, b), c);
+                planes[3 + axis] = lanes.max_or_second(lanes.max_or_second(a, b), c);
+            }
+            entered |= (self.boxes_entered(lanes, &planes).0 & lanes_in_half) << (8 * half);
+        }
+        entered
+    }
+
+    /// Which of eight boxes, given by their planes (the rows of
+    /// [`WideNode::planes`]), some ray of the packet may enter before its
+    /// closest hit, and a bound below their entry distances.
+    #[inline(always)]
+    fn boxes_entered(&self, lanes: S, planes: &[S::F; 6]) -> (u32, S::F) {
         let mut t_enter = lanes.splat(0.0);
         let mut t_exit = lanes.splat(self.farthest);
         for axis in 0..3 {
             if !self.usable[axis] {
                 continue;
             }
-            let near = lanes.sub(
-                lanes.load(&node.planes[self.near_plane[axis]]),
-                self.near_origin[axis],
-            );
-            let far = lanes.sub(
-                lanes.load(&node.planes[self.far_plane[axis]]),
-                self.far_origin[axis],
-            );
+            let near = lanes.sub(planes[self.near_plane[axis]], self.near_origin[axis]);
+            let far = lanes.sub(planes[self.far_plane[axis]], self.far_origin[axis]);
             // Finite times finite: no NaN.
             let least_near = lanes.min_or_second(
                 lanes.mul(near, self.inverse_low[axis]),
@@ -512,6 +598,7 @@ impl<S: Lanes8> Frustum<S> {
             t_enter = lanes.max_or_second(least_near, t_enter);
             t_exit = lanes.min_or_second(greatest_far, t_exit);
         }
-        lanes.le(t_enter, lanes.mul(t_exit, lanes.splat(ROBUST_FAR_SCALE))) & node.valid
+        let entered = lanes.le(t_enter, lanes.mul(t_exit, lanes.splat(ROBUST_FAR_SCALE)));
+        (entered, t_enter)
     }
 }
