@@ -785,7 +785,7 @@ fn lanes_agree_bit_for_bit() {
     /// Every operation on rows `a` and `b`, `S::N` lanes at a time: results as
     /// bits, and the compare masks.
     fn ops<S: Lanes>(s: S, a: &[f32; 16], b: &[f32; 16]) -> (Vec<[u32; 16]>, Vec<u32>) {
-        let mut values = vec![[0u32; 16]; 9];
+        let mut values = vec![[0u32; 16]; 10];
         let mut masks = vec![0u32; 4];
         for offset in (0..16).step_by(S::N) {
             let (x, y) = (s.load_at(a, offset), s.load_at(b, offset));
@@ -799,6 +799,8 @@ fn lanes_agree_bit_for_bit() {
                 s.splat(a[3]),
                 s.edge_in_f64(x, y, y, x),
                 s.edge_in_f64(y, x, s.splat(a[5]), x),
+                // Lane `i` from scalars: the order of the lanes.
+                s.lanes_of(|lane| b[offset + lane] * 2.0),
             ];
             for (value, result) in values.iter_mut().zip(results) {
                 let mut out = [0.0; 16];
@@ -827,6 +829,7 @@ fn lanes_agree_bit_for_bit() {
             assert_eq!(reference.1[0] >> lane & 1 == 1, a[lane] < b[lane]);
             let (x, y) = (f64::from(a[lane]), f64::from(b[lane]));
             assert_eq!(reference.0[7][lane], ((x * x - y * y) as f32).to_bits());
+            assert_eq!(reference.0[9][lane], (b[lane] * 2.0).to_bits());
         }
         #[cfg(target_arch = "x86_64")]
         {
