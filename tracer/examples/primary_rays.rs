@@ -4,7 +4,7 @@
 //! `cargo run --release -p dpp-tracer --example primary_rays -- [resolution] [width height] [out.png] [front|back|zoom]`
 
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
-use dpp_tracer::bvh::{Bvh, Ray};
+use dpp_tracer::bvh::Bvh;
 use dpp_tracer::camera::{Camera, CameraSetup, StandardView};
 use std::time::Instant;
 
@@ -40,16 +40,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("bounds: {} .. {}", bounds.min, bounds.max);
     let camera = Camera::standard(view, &bounds, width, height)?;
     let setup = CameraSetup::new(camera);
-    let camera = &setup.camera;
-    let rays: Vec<Ray> = setup
-        .morton_pixels
-        .iter()
-        .map(|&pixel| Ray {
-            origin: camera.eye,
-            direction: camera.direction(pixel % width, pixel / width, 0.5, 0.5),
-            tmax: f32::INFINITY,
-        })
-        .collect();
+    let rays = setup.pixel_centre_rays();
 
     let start = Instant::now();
     let hits: Vec<_> = rays.iter().map(|ray| bvh.intersect_closest(ray)).collect();

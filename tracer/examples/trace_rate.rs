@@ -7,7 +7,7 @@
 //! `cargo run --release -p dpp-tracer --example trace_rate -- [builtin[:RES] | MESH.ply[.gz]] [rounds] [WxH]`
 
 use dpp_tracer::builtin_scene::{builtin_scene, DEFAULT_RESOLUTION};
-use dpp_tracer::bvh::{Bvh, Ray};
+use dpp_tracer::bvh::Bvh;
 use dpp_tracer::camera::{Camera, CameraSetup, StandardView};
 use dpp_tracer::ply::load_ply;
 use std::path::Path;
@@ -40,16 +40,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let bounds = mesh.bounds().ok_or("empty mesh")?;
     for view in [StandardView::Front, StandardView::Back, StandardView::Zoom] {
         let setup = CameraSetup::new(Camera::standard(view, &bounds, width, height)?);
-        let camera = &setup.camera;
-        let rays: Vec<Ray> = setup
-            .morton_pixels
-            .iter()
-            .map(|&pixel| Ray {
-                origin: camera.eye,
-                direction: camera.direction(pixel % width, pixel / width, 0.5, 0.5),
-                tmax: f32::INFINITY,
-            })
-            .collect();
+        let rays = setup.pixel_centre_rays();
         let mut fastest = f64::INFINITY;
         let mut hits = 0usize;
         for _ in 0..rounds {

@@ -1,6 +1,7 @@
 //! The pinhole camera of the language reference (docs/language.md §8) and the
 //! Morton order of its pixels.
 
+use crate::bvh::Ray;
 use crate::mesh::Bounds;
 use crate::vector::unit_or_zero;
 use glam::Vec3;
@@ -207,6 +208,20 @@ impl CameraSetup {
             camera,
             morton_pixels,
         }
+    }
+
+    /// One ray through each pixel's centre, in Morton order, unbounded: the
+    /// coherent primary rays the traversal's packets are made for.
+    pub fn pixel_centre_rays(&self) -> Vec<Ray> {
+        let camera = &self.camera;
+        self.morton_pixels
+            .iter()
+            .map(|&pixel| Ray {
+                origin: camera.eye,
+                direction: camera.direction(pixel % camera.width, pixel / camera.width, 0.5, 0.5),
+                tmax: f32::INFINITY,
+            })
+            .collect()
     }
 
     /// The camera tracing only the pixels `traced` keeps (a rank's share of

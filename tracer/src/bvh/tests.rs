@@ -853,18 +853,7 @@ fn camera_rays(
     use crate::camera::{Camera, CameraSetup};
     let (width, height) = size;
     let camera = Camera::standard(view, &mesh.bounds().unwrap(), width, height).unwrap();
-    let setup = CameraSetup::new(camera);
-    setup
-        .morton_pixels
-        .iter()
-        .map(|&pixel| Ray {
-            origin: setup.camera.eye,
-            direction: setup
-                .camera
-                .direction(pixel % width, pixel / width, 0.5, 0.5),
-            tmax: f32::INFINITY,
-        })
-        .collect()
+    CameraSetup::new(camera).pixel_centre_rays()
 }
 
 /// The batch entry point against the binary traversal, in order, on every
