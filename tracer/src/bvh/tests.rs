@@ -881,6 +881,42 @@ fn check_batch_against_binary(bvh: &Bvh, rays: &[Ray]) {
             );
         }
     }
+    // The same hits written field by field (the detected implementation).
+    let mut columns = (
+        Vec::with_capacity(rays.len()),
+        Vec::with_capacity(rays.len()),
+        Vec::with_capacity(rays.len()),
+        Vec::with_capacity(rays.len()),
+    );
+    bvh.intersect_closest_into(
+        rays.len(),
+        |i| rays[i],
+        HitPlaces {
+            t: columns.0.spare_capacity_mut(),
+            prim: columns.1.spare_capacity_mut(),
+            u: columns.2.spare_capacity_mut(),
+            v: columns.3.spare_capacity_mut(),
+        },
+    );
+    // SAFETY: `intersect_closest_into` wrote every place below `rays.len()`.
+    unsafe {
+        columns.0.set_len(rays.len());
+        columns.1.set_len(rays.len());
+        columns.2.set_len(rays.len());
+        columns.3.set_len(rays.len());
+    }
+    for (i, expected) in expected.iter().enumerate() {
+        let (t, prim, u, v) = (columns.0[i], columns.1[i], columns.2[i], columns.3[i]);
+        let got = (prim != MISS_PRIM).then_some(HitRecord { t, prim, u, v });
+        assert!(
+            same_hit(got, *expected),
+            "written ray {i} {:?}: {got:?} vs binary {expected:?}",
+            rays[i]
+        );
+        if got.is_none() {
+            assert_eq!((t, u, v), (f32::INFINITY, 0.0, 0.0), "a miss's fields");
+        }
+    }
 }
 
 #[test]

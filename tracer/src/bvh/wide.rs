@@ -424,13 +424,15 @@ impl Isa {
 pub(super) type Found = Option<(usize, f32, f32, f32)>;
 
 /// Traces a batch of rays: `ray(i)` for `i` in `0..count`, results to `sink` in
-/// order. Dead rays (`tmax` not above 0) are not traversed.
+/// order, a packet's worth (up to [`MAX_PACKET`]) or an any-hit window's at a
+/// time, so that the caller's per-result work runs in one loop and not behind
+/// a call per ray. Dead rays (`tmax` not above 0) are not traversed.
 pub(super) fn trace_batch<const ANY_HIT: bool>(
     bvh: &Bvh,
     isa: Isa,
     count: usize,
     ray: impl Fn(usize) -> Ray,
-    sink: impl FnMut(Found),
+    sink: impl FnMut(&[Found]),
 ) {
     let ray = |index| bvh.to_bvh_space(&ray(index));
     match isa {
@@ -459,7 +461,7 @@ unsafe fn batch_avx512<const ANY_HIT: bool>(
     bvh: &Bvh,
     count: usize,
     ray: impl Fn(usize) -> Ray,
-    sink: impl FnMut(Found),
+    sink: impl FnMut(&[Found]),
 ) {
     batch::<_, _, ANY_HIT>(lanes, lanes.x16(), bvh, count, ray, sink)
 }
@@ -471,7 +473,7 @@ unsafe fn batch_avx2<const ANY_HIT: bool>(
     bvh: &Bvh,
     count: usize,
     ray: impl Fn(usize) -> Ray,
-    sink: impl FnMut(Found),
+    sink: impl FnMut(&[Found]),
 ) {
     batch::<_, _, ANY_HIT>(lanes, lanes, bvh, count, ray, sink)
 }
@@ -502,7 +504,7 @@ fn batch<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
     bvh: &Bvh,
     count: usize,
     ray: impl Fn(usize) -> Ray,
-    mut sink: impl FnMut(Found),
+    mut sink: impl FnMut(&[Found]),
 ) {
     let mut stack = Stack::new();
     let mut index = 0;
@@ -519,9 +521,7 @@ fn batch<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
                 &mut packet_stack,
                 &mut stack,
             );
-            for &hit in &found[..len] {
-                sink(hit);
-            }
+            sink(&found[..len]);
             index += len;
         }
         return;
@@ -534,8 +534,8 @@ fn batch<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
                 *slot = ray(index + i);
             }
             let rays = &rays[..T::N];
+            let mut found = [None; MAX_PACKET];
             if is_packet(rays) {
-                let mut found = [None; MAX_PACKET];
                 trace_packet::<S, T, false>(
                     boxes,
                     triangles,
@@ -545,28 +545,23 @@ fn batch<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
                     &mut stack,
                     &mut found,
                 );
-                for &hit in &found[..T::N] {
-                    sink(hit);
-                }
             } else {
-                for &ray in rays {
-                    sink(trace::<S, T, ANY_HIT>(
-                        boxes, triangles, bvh, ray, &mut stack,
-                    ));
+                for (&ray, result) in rays.iter().zip(&mut found) {
+                    *result = trace::<S, T, ANY_HIT>(boxes, triangles, bvh, ray, &mut stack);
                 }
             }
+            sink(&found[..T::N]);
             index += T::N;
         }
     }
-    while index < count {
-        sink(trace::<S, T, ANY_HIT>(
-            boxes,
-            triangles,
-            bvh,
-            ray(index),
-            &mut stack,
-        ));
-        index += 1;
+    // The rest (fewer than `T::N`) one by one.
+    let mut found = [None; MAX_PACKET];
+    let rest = count - index;
+    for (i, result) in found[..rest].iter_mut().enumerate() {
+        *result = trace::<S, T, ANY_HIT>(boxes, triangles, bvh, ray(index + i), &mut stack);
+    }
+    if rest > 0 {
+        sink(&found[..rest]);
     }
 }
 

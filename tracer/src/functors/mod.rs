@@ -57,7 +57,7 @@ pub mod volume_render;
 pub mod wgsl;
 pub mod with_weight;
 
-use crate::bvh::{HitRecord, Ray};
+use crate::bvh::{HitPlaces, Ray};
 use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, ClosureFunctor, Column, ColumnView, ElemType, Functor, FunctorError, RecordId,
@@ -90,7 +90,7 @@ pub(crate) fn tracer_functor(
 }
 
 /// `Hit.prim` of a miss.
-pub const MISS_PRIM: u32 = u32::MAX;
+pub use crate::bvh::MISS_PRIM;
 
 /// Secondary rays start this fraction of the scene diagonal off the surface,
 /// along the geometric normal on the side the ray came from (not along the
@@ -570,15 +570,18 @@ impl<'a> SurfaceWriter<'a> {
     }
 }
 
-/// Appends to a `Hit` output column the `len` hits that `produce` hands to its
-/// sink, in ray order, written straight into reserved space (a traversal's
-/// sink runs once per ray, where four checked pushes cost 5% of `intersect`).
-/// Both `intersect` engines write through it, so that they pay the same for
-/// the writes.
-pub(crate) fn write_hits(
+/// Appends `len` hits to a `Hit` output column, written by `produce` straight
+/// into reserved space, field by field ([`HitPlaces`]). Both `intersect`
+/// engines write through it, so that they pay the same for the writes.
+///
+/// # Safety
+/// `produce` must write every one of the `len` places of every column (as
+/// [`crate::bvh::Bvh::intersect_closest_into`] and [`HitPlaces::write`] of
+/// each index do).
+pub(crate) unsafe fn write_hits(
     column: &mut Column,
     len: usize,
-    produce: impl FnOnce(&mut HitSink<'_>),
+    produce: impl FnOnce(HitPlaces<'_>),
 ) -> Result<(), FunctorError> {
     let [t, prim, u, v] = record_fields_mut::<4>(column)?;
     let (t, prim, u, v) = (
@@ -587,54 +590,20 @@ pub(crate) fn write_hits(
         u.as_f32_mut(),
         v.as_f32_mut(),
     );
-    let mut sink = HitSink {
+    produce(HitPlaces {
         t: spare(t, len),
         prim: spare(prim, len),
         u: spare(u, len),
         v: spare(v, len),
-        written: 0,
-    };
-    produce(&mut sink);
-    let written = sink.written;
-    // SAFETY: the sink wrote the first `written` spare elements of every column.
+    });
+    // SAFETY: `produce` wrote the first `len` spare elements of every column.
     unsafe {
-        commit(t, written);
-        commit(prim, written);
-        commit(u, written);
-        commit(v, written);
+        commit(t, len);
+        commit(prim, len);
+        commit(u, len);
+        commit(v, len);
     }
     Ok(())
-}
-
-/// Where [`write_hits`]'s producer puts its hits, at most `len` of them.
-pub(crate) struct HitSink<'a> {
-    t: &'a mut [MaybeUninit<f32>],
-    prim: &'a mut [MaybeUninit<u32>],
-    u: &'a mut [MaybeUninit<f32>],
-    v: &'a mut [MaybeUninit<f32>],
-    written: usize,
-}
-
-impl HitSink<'_> {
-    #[inline(always)]
-    pub fn push(&mut self, hit: Option<HitRecord>) {
-        let (t, prim, u, v) = hit_fields(hit);
-        let index = self.written;
-        self.t[index].write(t);
-        self.prim[index].write(prim);
-        self.u[index].write(u);
-        self.v[index].write(v);
-        self.written += 1;
-    }
-}
-
-/// The `Hit` fields of a hit record, or of a miss.
-#[inline]
-pub(crate) fn hit_fields(hit: Option<HitRecord>) -> (f32, u32, f32, f32) {
-    match hit {
-        Some(hit) => (hit.t, hit.prim, hit.u, hit.v),
-        None => (f32::INFINITY, MISS_PRIM, 0.0, 0.0),
-    }
 }
 
 /// The `scene.diagonal` uniform (positive and finite).

@@ -42,9 +42,12 @@ fn run_cpu(
     let rays = RayColumns::new(&inputs[0]);
     let len = rays.len();
     // Dead rays (tmax <= 0) miss without a traversal.
-    write_hits(&mut outputs[0], len, |sink| {
-        bvh.intersect_closest_batch(len, |index| rays.get(index), |hit| sink.push(hit))
-    })
+    // SAFETY: `intersect_closest_into` writes all `len` places.
+    unsafe {
+        write_hits(&mut outputs[0], len, |hits| {
+            bvh.intersect_closest_into(len, |index| rays.get(index), hits)
+        })
+    }
 }
 
 #[cfg(test)]

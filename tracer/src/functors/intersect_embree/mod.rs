@@ -200,47 +200,51 @@ fn intersect(
     let n = rays.len();
     let scene = &scene.scene;
     let mut context = IntersectContext::coherent();
-    write_hits(&mut outputs[0], n, |sink| match mode {
-        EmbreeMode::Single => {
-            for index in 0..n {
-                let hit = if rays.tmax[index] > 0.0 {
-                    let mut ray_hit = RayHit::from_ray(embree_ray(&rays, index));
-                    scene.intersect(&mut context, &mut ray_hit);
-                    (ray_hit.hit.geomID != INVALID_ID).then_some(crate::bvh::HitRecord {
-                        t: ray_hit.ray.tfar,
-                        prim: ray_hit.hit.primID,
-                        u: ray_hit.hit.u,
-                        v: ray_hit.hit.v,
-                    })
-                } else {
-                    None
-                };
-                sink.push(hit);
-            }
-        }
-        EmbreeMode::Packet16 => {
-            let mut packet = RayHit16 {
-                ray: Ray16::empty(),
-                hit: Hit16::new(),
-            };
-            for (start, lanes) in packets(n) {
-                packet.hit.geomID = [INVALID_ID; 16];
-                packet.hit.primID = [INVALID_ID; 16];
-                let valid = load_packet(&mut packet.ray, &rays, start, lanes);
-                scene.intersect16(&mut context, &mut packet, &valid);
-                for lane in 0..lanes {
-                    let hit =
-                        (packet.hit.geomID[lane] != INVALID_ID).then(|| crate::bvh::HitRecord {
-                            t: packet.ray.tfar(lane),
-                            prim: packet.hit.primID[lane],
-                            u: packet.hit.u(lane),
-                            v: packet.hit.v(lane),
-                        });
-                    sink.push(hit);
+    // SAFETY: both modes write every index below `n`.
+    unsafe {
+        write_hits(&mut outputs[0], n, |mut hits| match mode {
+            EmbreeMode::Single => {
+                for index in 0..n {
+                    let hit = if rays.tmax[index] > 0.0 {
+                        let mut ray_hit = RayHit::from_ray(embree_ray(&rays, index));
+                        scene.intersect(&mut context, &mut ray_hit);
+                        (ray_hit.hit.geomID != INVALID_ID).then_some(crate::bvh::HitRecord {
+                            t: ray_hit.ray.tfar,
+                            prim: ray_hit.hit.primID,
+                            u: ray_hit.hit.u,
+                            v: ray_hit.hit.v,
+                        })
+                    } else {
+                        None
+                    };
+                    hits.write(index, hit);
                 }
             }
-        }
-    })
+            EmbreeMode::Packet16 => {
+                let mut packet = RayHit16 {
+                    ray: Ray16::empty(),
+                    hit: Hit16::new(),
+                };
+                for (start, lanes) in packets(n) {
+                    packet.hit.geomID = [INVALID_ID; 16];
+                    packet.hit.primID = [INVALID_ID; 16];
+                    let valid = load_packet(&mut packet.ray, &rays, start, lanes);
+                    scene.intersect16(&mut context, &mut packet, &valid);
+                    for lane in 0..lanes {
+                        let hit = (packet.hit.geomID[lane] != INVALID_ID).then(|| {
+                            crate::bvh::HitRecord {
+                                t: packet.ray.tfar(lane),
+                                prim: packet.hit.primID[lane],
+                                u: packet.hit.u(lane),
+                                v: packet.hit.v(lane),
+                            }
+                        });
+                        hits.write(start + lane, hit);
+                    }
+                }
+            }
+        })
+    }
 }
 
 /// `occluded` through Embree; see the module documentation.
