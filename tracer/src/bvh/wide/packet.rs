@@ -12,8 +12,14 @@
 //! - a packet none of whose rays enters the tree's box ends at once;
 //! - a packet tests a node's eight children's boxes against its frustum (the
 //!   range of its rays' origins and inverse directions, up to its farthest
-//!   closest hit so far) and tests only the children that pass ray by ray,
-//!   nearest first by the frustum's entry distance;
+//!   closest hit so far) and visits those that pass nearest first by the
+//!   frustum's entry distance. A closest-hit packet (a camera's rays from one
+//!   origin) goes by the frustum alone, as Embree's coherent packets do: its
+//!   rays' own box tests dropped 0.4% of the children the frustum passed on
+//!   the bunny, and cost more than the visits they saved (dropping them gained
+//!   4-9%). An any-hit packet (rays from many origins, a looser frustum) tests
+//!   the children that pass ray by ray, and its rays leave where they miss
+//!   (the frustum alone made shadow and occlusion rays 1.1-1.6 times slower);
 //! - at a leaf, it tests the triangles' own boxes against the frustum the same
 //!   way, and only those that pass ray by ray (a leaf holds up to sixteen
 //!   triangles, and a packet of a zoomed view's pixels sees a few of them).
@@ -260,8 +266,12 @@ fn traverse_packet<
             while children != 0 {
                 let child = children.trailing_zeros() as usize;
                 children &= children - 1;
-                let (rays_in, t_enter) =
-                    box_rays.enter(lanes, |plane| node.planes[plane][child], closest, active);
+                let (rays_in, t_enter) = if ANY_HIT {
+                    box_rays.enter(lanes, |plane| node.planes[plane][child], closest, active)
+                } else {
+                    // The frustum's bound stands in for each ray's entry.
+                    (active, lanes.splat(frustum_entry[child]))
+                };
                 if rays_in != 0 {
                     t_entry[count] = t_enter;
                     entered[count] = (node.children[child], rays_in, frustum_entry[child]);
