@@ -108,14 +108,33 @@ impl HitPlaces<'_> {
     /// Writes `hit` (or a miss) to place `index` of every column.
     #[inline(always)]
     pub fn write(&mut self, index: usize, hit: Option<HitRecord>) {
-        let (t, prim, u, v) = match hit {
-            Some(hit) => (hit.t, hit.prim, hit.u, hit.v),
-            None => (f32::INFINITY, MISS_PRIM, 0.0, 0.0),
-        };
-        self.t[index].write(t);
-        self.prim[index].write(prim);
-        self.u[index].write(u);
-        self.v[index].write(v);
+        self.write_from(index, std::iter::once(hit));
+    }
+
+    /// Writes `hits` to places `start..` of every column, one after another
+    /// (each column's places checked once, not per hit).
+    #[inline(always)]
+    pub fn write_from(
+        &mut self,
+        start: usize,
+        hits: impl ExactSizeIterator<Item = Option<HitRecord>>,
+    ) {
+        let end = start + hits.len();
+        let places = self.t[start..end]
+            .iter_mut()
+            .zip(&mut self.prim[start..end])
+            .zip(&mut self.u[start..end])
+            .zip(&mut self.v[start..end]);
+        for (hit, (((t, prim), u), v)) in hits.zip(places) {
+            let fields = match hit {
+                Some(hit) => (hit.t, hit.prim, hit.u, hit.v),
+                None => (f32::INFINITY, MISS_PRIM, 0.0, 0.0),
+            };
+            t.write(fields.0);
+            prim.write(fields.1);
+            u.write(fields.2);
+            v.write(fields.3);
+        }
     }
 }
 
@@ -336,11 +355,10 @@ impl Bvh {
     ) {
         let mut hits = hits;
         let mut written = 0;
+        let to_hit_record = self.hit_records();
         wide::trace_batch::<false>(self, Isa::detect(), count, ray, |found| {
-            for &found in found {
-                hits.write(written, self.hit_record(found));
-                written += 1;
-            }
+            hits.write_from(written, found.iter().map(|&found| to_hit_record(found)));
+            written += found.len();
         });
         // What callers rely on to treat the places as initialised.
         assert_eq!(written, count, "the traversal answered every ray");
@@ -398,14 +416,25 @@ impl Bvh {
 
     #[inline]
     fn hit_record(&self, found: wide::Found) -> Option<HitRecord> {
+        self.hit_records()(found)
+    }
+
+    /// [`Bvh::hit_record`] with what it reads of the tree read once: for a
+    /// loop over many hits, whose writes the compiler cannot tell apart from
+    /// the tree's fields.
+    #[inline(always)]
+    fn hit_records(&self) -> impl Fn(wide::Found) -> Option<HitRecord> + '_ {
         // Exact: the scale is a power of two whose reciprocal is a normal f32.
         let inverse_scale = 1.0 / self.scale;
-        found.map(|(leaf_triangle, t, u, v)| HitRecord {
-            t: t * inverse_scale,
-            prim: self.triangle_ids[leaf_triangle],
-            u,
-            v,
-        })
+        let triangle_ids = &self.triangle_ids[..];
+        move |found| {
+            found.map(|(leaf_triangle, t, u, v)| HitRecord {
+                t: t * inverse_scale,
+                prim: triangle_ids[leaf_triangle],
+                u,
+                v,
+            })
+        }
     }
 
     /// Dispatches on the ray's dominant axis so that the triangle test's axis
