@@ -230,17 +230,16 @@ fn intersect(
                     packet.hit.primID = [INVALID_ID; 16];
                     let valid = load_packet(&mut packet.ray, &rays, start, lanes);
                     scene.intersect16(&mut context, &mut packet, &valid);
-                    for lane in 0..lanes {
-                        let hit = (packet.hit.geomID[lane] != INVALID_ID).then(|| {
-                            crate::bvh::HitRecord {
-                                t: packet.ray.tfar(lane),
-                                prim: packet.hit.primID[lane],
-                                u: packet.hit.u(lane),
-                                v: packet.hit.v(lane),
-                            }
-                        });
-                        hits.write(start + lane, hit);
-                    }
+                    // A packet's hits at a time, as dpp's traversal writes them.
+                    let packet_hits = (0..lanes).map(|lane| {
+                        (packet.hit.geomID[lane] != INVALID_ID).then(|| crate::bvh::HitRecord {
+                            t: packet.ray.tfar(lane),
+                            prim: packet.hit.primID[lane],
+                            u: packet.hit.u(lane),
+                            v: packet.hit.v(lane),
+                        })
+                    });
+                    hits.write_from(start, packet_hits);
                 }
             }
         })
