@@ -9,6 +9,10 @@
 //! only) also runs WORKLOAD1 with Embree behind `intersect` (single rays and
 //! 16-ray packets) and checks that both engines hit the same triangles, and
 //! runs WORKLOAD3's fused plan with Embree behind `intersect` and `occluded`.
+//! For the comparisons issue 26's bars are about (WORKLOAD1's intersection,
+//! WORKLOAD3's frame, against Embree's packets) it also runs dpp's plan and
+//! Embree's in turn, a frame of each per round, so that the machine's slow
+//! spells fall on both: their ratio is the median of the rounds' ratios.
 //!
 //! On the CPU a frame's stage times come from the measured run itself. On the
 //! GPU, profiling waits for the device after every stage, so the measured
@@ -583,17 +587,22 @@ pub struct ViewResult {
     pub engine_frames: Vec<TracedByEngine>,
     /// `--versus`: the other file against the workload.
     pub side_by_side: Option<SideBySide>,
+    /// With Embree: WORKLOAD1's intersection (unfused) and WORKLOAD3's fused
+    /// frame, dpp and Embree's packets (the bars' engine) in turn.
+    pub engines_in_turn: Vec<SideBySide>,
 }
 
-/// `--versus`: a pipeline file and the workload it stands for, their fused
-/// frames measured in turn on one view.
+/// Two plans measured in turn on one view: `--versus` (a pipeline file and
+/// the workload it stands for, fused frames), or a workload with dpp and
+/// with Embree's packets behind its traversal.
 #[derive(Clone, Debug)]
 pub struct SideBySide {
     pub workload: u32,
-    /// The files' names, as the report prints them.
+    /// The files' or engines' names, as the report prints them.
     pub own: String,
     pub versus: String,
-    /// Each measured round's frame of the workload's file and of the other.
+    pub quantity: InTurn,
+    /// Each measured round's `quantity` with the workload's plan and with the other.
     pub own_ms: Vec<f64>,
     pub versus_ms: Vec<f64>,
 }
@@ -736,7 +745,10 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
         + if versus.is_some() { 2 } else { 0 }
         + embree_plans(1, 2, 4)
         + embree_plans(2, 1, 4)
-        + embree_plans(3, 1, 2);
+        + embree_plans(3, 1, 2)
+        // dpp and Embree's packets in turn (WORKLOAD1 and WORKLOAD3).
+        + embree_plans(1, 2, 1)
+        + embree_plans(3, 2, 1);
     let total = setup.scenes.len() as u64 * setup.views.len() as u64 * per_view * rounds;
     let progress = progress_bar(total);
 
@@ -805,6 +817,7 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 engines: Vec::new(),
                 engine_frames: Vec::new(),
                 side_by_side: None,
+                engines_in_turn: Vec::new(),
             };
             let mut dpp_prims = None;
             for (workload, _, fused, unfused) in &plans {
@@ -842,11 +855,13 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 ));
                 let runs =
                     |plan| FrameRuns::new(plan, library, &view, &pool, gpu, &args, &progress);
-                let (own_ms, versus_ms) = measure_side_by_side(&runs(own), &runs(versus), &args)?;
+                let (own_ms, versus_ms) =
+                    measure_side_by_side(&runs(own), &runs(versus), &args, InTurn::Frame)?;
                 view_result.side_by_side = Some(SideBySide {
                     workload: *workload,
                     own: file_name(own_path),
                     versus: file_name(path),
+                    quantity: InTurn::Frame,
                     own_ms,
                     versus_ms,
                 });
@@ -908,6 +923,46 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                     view_result.engines.push(compare(
                         engine, fused, unfused, dpp_prims, &prims, at_border,
                     ));
+                }
+            }
+            // The bars' comparison: dpp's plan and the same with Embree's
+            // packets, a frame of each in turn, so that a slow spell of the
+            // machine falls on both.
+            #[cfg(feature = "embree")]
+            if let Some((embree, _)) = &embree {
+                use dpp_tracer::functors::intersect_embree::{library_with_embree, EmbreeMode};
+                let engine = Engine::EmbreePacket;
+                let swapped = library_with_embree(library, embree.clone(), EmbreeMode::Packet16)
+                    .map_err(|e| Failure::Run(e.message))?;
+                for (workload, path, own_fused, own_unfused) in &plans {
+                    let (quantity, own, fuse) = match workload {
+                        1 => (InTurn::IntersectStage, own_unfused, false),
+                        3 => (InTurn::Frame, own_fused, true),
+                        _ => continue,
+                    };
+                    progress.set_message(format!(
+                        "{} {view_name} workload{workload}: dpp and {} in turn",
+                        spec.name(),
+                        engine.name()
+                    ));
+                    let theirs = compile(path, &swapped, fuse)?;
+                    let runs = |plan, library| {
+                        FrameRuns::new(plan, library, &view, &pool, None, &args, &progress)
+                    };
+                    let (own_ms, versus_ms) = measure_side_by_side(
+                        &runs(own, library),
+                        &runs(&theirs, &swapped),
+                        &args,
+                        quantity,
+                    )?;
+                    view_result.engines_in_turn.push(SideBySide {
+                        workload: *workload,
+                        own: "dpp".into(),
+                        versus: engine.name().into(),
+                        quantity,
+                        own_ms,
+                        versus_ms,
+                    });
                 }
             }
             let _ = (&embree, &dpp_prims);
@@ -1189,19 +1244,51 @@ impl<'a> FrameRuns<'a> {
     }
 }
 
-/// `--versus`: the warm-up and measured rounds of two plans in turn, a frame
-/// of each per round, the first of the two alternating from round to round
-/// so that neither always runs in the other's wake; returns each plan's
-/// measured frames, ms.
+/// What a side-by-side measurement times in each frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InTurn {
+    /// The whole frame (wall time).
+    Frame,
+    /// The unfused plan's `map<intersect>` stage (WORKLOAD1's intersection).
+    #[cfg_attr(not(feature = "embree"), allow(dead_code))]
+    IntersectStage,
+}
+
+impl InTurn {
+    pub fn name(self) -> &'static str {
+        match self {
+            InTurn::Frame => "fused frame",
+            InTurn::IntersectStage => "map<intersect> stage",
+        }
+    }
+}
+
+/// The warm-up and measured rounds of two plans in turn (`--versus`, or dpp
+/// and Embree's packets), a frame of each per round, the first of the two
+/// alternating from round to round so that neither always runs in the
+/// other's wake; returns each plan's measured `quantity`, ms.
 fn measure_side_by_side(
     own: &FrameRuns<'_>,
     versus: &FrameRuns<'_>,
     args: &BenchArgs,
+    quantity: InTurn,
 ) -> Result<(Vec<f64>, Vec<f64>), Failure> {
     let frame = |runs: &FrameRuns<'_>| -> Result<f64, Failure> {
         let (result, elapsed) = runs.frame(false)?;
+        let measured = match quantity {
+            InTurn::Frame => ms(elapsed),
+            InTurn::IntersectStage => (result.profile.iter())
+                .find(|stage| stage.label == "map<intersect>")
+                .map(|stage| ms(stage.time))
+                .ok_or_else(|| {
+                    Failure::Run(format!(
+                        "{}: no `map<intersect>` stage to time",
+                        runs.plan.pipeline
+                    ))
+                })?,
+        };
         runs.give_back(result);
-        Ok(ms(elapsed))
+        Ok(measured)
     };
     let (mut own_ms, mut versus_ms) = (Vec::new(), Vec::new());
     for round in 0..args.warmup + args.rounds {

@@ -1,7 +1,7 @@
 //! `dpp bench`'s results as markdown tables (in the manner of the paper's
 //! tables) and as JSON.
 
-use super::{ms, Engine, Measurement, SceneResult, AGREEMENT};
+use super::{ms, Engine, Measurement, SceneResult, SideBySide, ViewResult, AGREEMENT};
 use dpp_gpu::GpuContext;
 use dpp_runtime::interpret::listed_op_shares;
 use serde_json::{json, Value};
@@ -381,12 +381,20 @@ impl Report {
         md.push('\n');
     }
 
+    /// Every view's pairs of plans measured in turn that `pairs` picks.
+    fn pairs_in_turn<'a, I: Iterator<Item = &'a SideBySide>>(
+        &'a self,
+        pairs: impl Fn(&'a ViewResult) -> I,
+    ) -> Vec<(&'a SceneResult, &'a ViewResult, &'a SideBySide)> {
+        (self.scenes.iter())
+            .flat_map(|scene| scene.views.iter().map(move |view| (scene, view)))
+            .flat_map(|(scene, view)| pairs(view).map(move |pair| (scene, view, pair)))
+            .collect()
+    }
+
     /// `--versus`: both files' frames on every view and their ratio.
     fn write_side_by_side(&self, md: &mut String) {
-        let rows: Vec<_> = (self.scenes.iter())
-            .flat_map(|scene| scene.views.iter().map(move |view| (scene, view)))
-            .filter_map(|(scene, view)| Some((scene, view, view.side_by_side.as_ref()?)))
-            .collect();
+        let rows = self.pairs_in_turn(|view| view.side_by_side.iter());
         let Some((_, _, first)) = rows.first() else {
             return;
         };
@@ -400,29 +408,22 @@ impl Report {
             md,
             "Each round runs a frame of each file, one after the other (the first of the two alternating), after the warm-up rounds; a ratio is `{versus}`'s frame over `{own}`'s, and its median is over the rounds' ratios.\n"
         );
-        let _ = writeln!(
-            md,
-            "| scene | view | `{own}` min | median | `{versus}` min | median | ratio: median | of the minima |"
-        );
-        let _ = writeln!(
-            md,
-            "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"
-        );
-        for (scene, view, pair) in rows {
-            let _ = writeln!(
-                md,
-                "| {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.3} | {:.3} |",
-                scene.name,
-                view.view,
-                minimum(&pair.own_ms),
-                median(&pair.own_ms),
-                minimum(&pair.versus_ms),
-                median(&pair.versus_ms),
-                median(&pair.ratios()),
-                minimum(&pair.versus_ms) / minimum(&pair.own_ms)
-            );
+        write_in_turn_table(md, &rows);
+    }
+
+    /// With Embree: dpp and Embree's packets in turn, the bars' comparison.
+    fn write_engines_in_turn(&self, md: &mut String) {
+        let rows = self.pairs_in_turn(|view| view.engines_in_turn.iter());
+        if rows.is_empty() {
+            return;
         }
-        md.push('\n');
+        let _ = writeln!(md, "## dpp and Embree's packets in turn, ms\n");
+        let _ = writeln!(
+            md,
+            "Each round runs the plan with dpp's traversal and with Embree's 16-ray packets behind `intersect` and `occluded` ({}), one after the other (the first of the two alternating), after the warm-up rounds: WORKLOAD1's unfused `map<intersect>` stage, WORKLOAD3's fused frame. A ratio is Embree's time over dpp's (above 1: dpp is faster), and its median is over the rounds' ratios.\n",
+            self.embree_test_words()
+        );
+        write_in_turn_table(md, &rows);
     }
 
     pub fn markdown(&self) -> String {
@@ -641,6 +642,7 @@ impl Report {
                 self.write_engine_frames(&mut md, workload);
             }
         }
+        self.write_engines_in_turn(&mut md);
         self.write_side_by_side(&mut md);
 
         let _ = writeln!(
@@ -811,15 +813,8 @@ impl Report {
                                     "fused_over_workload1_intersect": over_intersect,
                                 })
                             }).collect::<Vec<_>>(),
-                            "side_by_side": view.side_by_side.as_ref().map(|pair| json!({
-                                "workload": pair.workload,
-                                "own": pair.own,
-                                "versus": pair.versus,
-                                "own_frames_ms": pair.own_ms,
-                                "versus_frames_ms": pair.versus_ms,
-                                "ratios": pair.ratios(),
-                                "median_ratio": median(&pair.ratios()),
-                            })),
+                            "side_by_side": view.side_by_side.as_ref().map(side_by_side_json),
+                            "engines_in_turn": view.engines_in_turn.iter().map(side_by_side_json).collect::<Vec<_>>(),
                         })
                     })
                     .collect();
@@ -870,6 +865,53 @@ impl Report {
 /// time its chunks spent in each op, summed over threads, as a mean over the
 /// views; the op's share of the stage's op time; and that share of the stage's
 /// wall time, which is what the op costs the frame.
+/// Plans measured in turn, a row per pair: each's minimum and median, and
+/// the other's over the own one's.
+fn write_in_turn_table(md: &mut String, rows: &[(&SceneResult, &ViewResult, &SideBySide)]) {
+    let _ = writeln!(
+        md,
+        "| scene | view | workload | measured | own | min | median | other | min | median | other / own: median of the rounds | of the minima |"
+    );
+    let _ = writeln!(
+        md,
+        "| --- | --- | --- | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"
+    );
+    for (scene, view, pair) in rows {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {:.1} | {:.1} | {} | {:.1} | {:.1} | {:.3} | {:.3} |",
+            scene.name,
+            view.view,
+            pair.workload,
+            pair.quantity.name(),
+            pair.own,
+            minimum(&pair.own_ms),
+            median(&pair.own_ms),
+            pair.versus,
+            minimum(&pair.versus_ms),
+            median(&pair.versus_ms),
+            median(&pair.ratios()),
+            minimum(&pair.versus_ms) / minimum(&pair.own_ms)
+        );
+    }
+    md.push('\n');
+}
+
+/// Two plans measured in turn: each round's `quantity`, ms, and the other's
+/// over the own one's.
+fn side_by_side_json(pair: &SideBySide) -> Value {
+    json!({
+        "workload": pair.workload,
+        "own": pair.own,
+        "versus": pair.versus,
+        "measured": pair.quantity.name(),
+        "own_ms": pair.own_ms,
+        "versus_ms": pair.versus_ms,
+        "ratios": pair.ratios(),
+        "median_ratio": median(&pair.ratios()),
+    })
+}
+
 fn write_op_split(md: &mut String, measurements: &[&Measurement], views: f64) {
     let Some(first) = measurements.first() else {
         return;

@@ -57,6 +57,28 @@ fn bench_json(dir: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("bench.json")).unwrap()).unwrap()
 }
 
+/// Two plans measured in turn (a JSON `side_by_side` entry): `rounds`
+/// measured rounds of each, every ratio the other's time over the own one's;
+/// returns the ratios.
+fn check_rounds_in_turn(pair: &serde_json::Value, rounds: usize) -> Vec<f64> {
+    let numbers = |name: &str| -> Vec<f64> {
+        (pair[name].as_array().unwrap().iter())
+            .map(|v| v.as_f64().unwrap())
+            .collect()
+    };
+    let (own, versus, ratios) = (numbers("own_ms"), numbers("versus_ms"), numbers("ratios"));
+    assert_eq!(
+        (own.len(), versus.len(), ratios.len()),
+        (rounds, rounds, rounds),
+        "{pair}"
+    );
+    for ((own, versus), ratio) in own.iter().zip(&versus).zip(&ratios) {
+        assert!(*own > 0.0 && *versus > 0.0, "{pair}");
+        assert!((ratio - versus / own).abs() < 1e-9, "{pair}");
+    }
+    ratios
+}
+
 #[test]
 fn a_tiny_bench_writes_tables_json_and_a_chart() {
     let dir = tempfile::tempdir().unwrap();
@@ -265,7 +287,7 @@ fn a_bench_versus_a_file_measures_both_frame_by_frame() {
         .filter(|line| {
             line.starts_with("| builtin:16 | front |") || line.starts_with("| builtin:16 | back |")
         })
-        .filter(|line| line.split('|').count() == 10)
+        .filter(|line| line.split('|').count() == 14)
         .count();
     assert_eq!(rows, 2, "{stdout}");
     let report = bench_json(dir.path());
@@ -273,22 +295,8 @@ fn a_bench_versus_a_file_measures_both_frame_by_frame() {
         let pair = &view["side_by_side"];
         assert_eq!(pair["workload"], 2);
         assert_eq!(pair["versus"], "workload2_expressions.dpp");
-        let frames = |name: &str| -> Vec<f64> {
-            (pair[name].as_array().unwrap().iter())
-                .map(|v| v.as_f64().unwrap())
-                .collect()
-        };
-        let (own, versus, ratios) = (
-            frames("own_frames_ms"),
-            frames("versus_frames_ms"),
-            frames("ratios"),
-        );
         // The measured rounds only: the warm-up round is not among them.
-        assert_eq!((own.len(), versus.len(), ratios.len()), (3, 3, 3));
-        for ((own, versus), ratio) in own.iter().zip(&versus).zip(&ratios) {
-            assert!(*own > 0.0 && *versus > 0.0);
-            assert!((ratio - versus / own).abs() < 1e-9);
-        }
+        let ratios = check_rounds_in_turn(pair, 3);
         let mut sorted = ratios.clone();
         sorted.sort_by(f64::total_cmp);
         assert_eq!(pair["median_ratio"].as_f64().unwrap(), sorted[1]);
@@ -490,6 +498,31 @@ fn an_embree_bench_compares_every_workload() {
         let occluded = engine["occluded_thread_ms"].as_f64().unwrap();
         assert_eq!(occluded > 0.0, engine["workload"] == 3, "{engine}");
     }
+    // The bars' comparison: WORKLOAD1's intersection and WORKLOAD3's frame,
+    // dpp and Embree's packets in turn, each round a ratio.
+    assert!(
+        markdown.contains("## dpp and Embree's packets in turn, ms"),
+        "{markdown}"
+    );
+    let in_turn = view["engines_in_turn"].as_array().unwrap();
+    let measured: Vec<(u64, &str, &str)> = (in_turn.iter())
+        .map(|pair| {
+            assert_eq!(pair["own"], "dpp");
+            check_rounds_in_turn(pair, 1);
+            (
+                pair["workload"].as_u64().unwrap(),
+                pair["versus"].as_str().unwrap(),
+                pair["measured"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        measured,
+        [
+            (1, "embree-packet", "map<intersect> stage"),
+            (3, "embree-packet", "fused frame"),
+        ]
+    );
 }
 
 #[test]
