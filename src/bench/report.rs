@@ -861,10 +861,6 @@ impl Report {
     }
 }
 
-/// The op split of each fused stage of more than one op (CPU backend): the
-/// time its chunks spent in each op, summed over threads, as a mean over the
-/// views; the op's share of the stage's op time; and that share of the stage's
-/// wall time, which is what the op costs the frame.
 /// Plans measured in turn, a row per pair: each's minimum and median, and
 /// the other's over the own one's.
 fn write_in_turn_table(md: &mut String, rows: &[(&SceneResult, &ViewResult, &SideBySide)]) {
@@ -912,6 +908,10 @@ fn side_by_side_json(pair: &SideBySide) -> Value {
     })
 }
 
+/// The op split of each fused stage of more than one op (CPU backend): the
+/// time its chunks spent in each op, summed over threads, as a mean over the
+/// views; the op's share of the stage's op time; and that share of the stage's
+/// wall time, which is what the op costs the frame.
 fn write_op_split(md: &mut String, measurements: &[&Measurement], views: f64) {
     let Some(first) = measurements.first() else {
         return;
