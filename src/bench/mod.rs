@@ -457,10 +457,13 @@ impl Measurement {
     pub fn intersect_ms(&self) -> Option<f64> {
         self.stages
             .iter()
-            .find(|s| s.label == "map<intersect>")
+            .find(|s| s.label == INTERSECT_STAGE)
             .map(|s| s.ms)
     }
 }
+
+/// The label of WORKLOAD1's unfused intersection stage, whose time its rate is of.
+const INTERSECT_STAGE: &str = "map<intersect>";
 
 /// Whether a profiled op is a `map` of `functor` (`hits = map<intersect>`).
 fn maps(op: &OpTiming, functor: &str) -> bool {
@@ -878,6 +881,41 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                 ] {
                     let swapped = library_with_embree(library, embree.clone(), mode)
                         .map_err(|e| Failure::Run(e.message))?;
+                    // The bars' comparison: dpp's plan and the same with
+                    // Embree's packets, a frame of each in turn, so that a
+                    // slow spell of the machine falls on both.
+                    if engine == Engine::EmbreePacket {
+                        for (workload, path, own_fused, own_unfused) in &plans {
+                            let (quantity, own, fuse) = match workload {
+                                1 => (InTurn::IntersectStage, own_unfused, false),
+                                3 => (InTurn::Frame, own_fused, true),
+                                _ => continue,
+                            };
+                            progress.set_message(format!(
+                                "{} {view_name} workload{workload}: dpp and {} in turn",
+                                spec.name(),
+                                engine.name()
+                            ));
+                            let theirs = compile(path, &swapped, fuse)?;
+                            let runs = |plan, library| {
+                                FrameRuns::new(plan, library, &view, &pool, None, &args, &progress)
+                            };
+                            let (own_ms, versus_ms) = measure_side_by_side(
+                                &runs(own, library),
+                                &runs(&theirs, &swapped),
+                                &args,
+                                quantity,
+                            )?;
+                            view_result.engines_in_turn.push(SideBySide {
+                                workload: *workload,
+                                own: "dpp".into(),
+                                versus: engine.name().into(),
+                                quantity,
+                                own_ms,
+                                versus_ms,
+                            });
+                        }
+                    }
                     // The high-quality scene is for the set-up tables: its
                     // trace rate (WORKLOAD1) and WORKLOAD2's first image.
                     let workloads: &[u32] = if engine.high_quality() { &[2] } else { &[2, 3] };
@@ -923,46 +961,6 @@ pub fn bench(args: BenchArgs, library: &FunctorLibrary) -> Result<(), Failure> {
                     view_result.engines.push(compare(
                         engine, fused, unfused, dpp_prims, &prims, at_border,
                     ));
-                }
-            }
-            // The bars' comparison: dpp's plan and the same with Embree's
-            // packets, a frame of each in turn, so that a slow spell of the
-            // machine falls on both.
-            #[cfg(feature = "embree")]
-            if let Some((embree, _)) = &embree {
-                use dpp_tracer::functors::intersect_embree::{library_with_embree, EmbreeMode};
-                let engine = Engine::EmbreePacket;
-                let swapped = library_with_embree(library, embree.clone(), EmbreeMode::Packet16)
-                    .map_err(|e| Failure::Run(e.message))?;
-                for (workload, path, own_fused, own_unfused) in &plans {
-                    let (quantity, own, fuse) = match workload {
-                        1 => (InTurn::IntersectStage, own_unfused, false),
-                        3 => (InTurn::Frame, own_fused, true),
-                        _ => continue,
-                    };
-                    progress.set_message(format!(
-                        "{} {view_name} workload{workload}: dpp and {} in turn",
-                        spec.name(),
-                        engine.name()
-                    ));
-                    let theirs = compile(path, &swapped, fuse)?;
-                    let runs = |plan, library| {
-                        FrameRuns::new(plan, library, &view, &pool, None, &args, &progress)
-                    };
-                    let (own_ms, versus_ms) = measure_side_by_side(
-                        &runs(own, library),
-                        &runs(&theirs, &swapped),
-                        &args,
-                        quantity,
-                    )?;
-                    view_result.engines_in_turn.push(SideBySide {
-                        workload: *workload,
-                        own: "dpp".into(),
-                        versus: engine.name().into(),
-                        quantity,
-                        own_ms,
-                        versus_ms,
-                    });
                 }
             }
             let _ = (&embree, &dpp_prims);
@@ -1278,7 +1276,7 @@ fn measure_side_by_side(
         let measured = match quantity {
             InTurn::Frame => ms(elapsed),
             InTurn::IntersectStage => (result.profile.iter())
-                .find(|stage| stage.label == "map<intersect>")
+                .find(|stage| stage.label == INTERSECT_STAGE)
                 .map(|stage| ms(stage.time))
                 .ok_or_else(|| {
                     Failure::Run(format!(

@@ -41,12 +41,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let bounds = mesh.bounds().ok_or("empty mesh")?;
     for view in [StandardView::Front, StandardView::Back, StandardView::Zoom] {
         let setup = CameraSetup::new(Camera::standard(view, &bounds, width, height)?);
-        let mut rays = setup.pixel_centre_rays();
-        if std::env::var_os("AWAY").is_some() {
-            for r in &mut rays {
-                r.direction = -r.direction;
-            }
-        }
+        let rays = setup.pixel_centre_rays();
         let mut fastest = f64::INFINITY;
         let mut hits = 0usize;
         let mut columns = HitColumns::with_capacity(CHUNK);
