@@ -322,7 +322,14 @@ impl Bvh {
     /// [`Bvh::occluded`] of rays `ray(0) .. ray(count - 1)`, each up to its own
     /// `tmax`, results to `sink` in order (rays with `tmax` not above 0 are never
     /// blocked).
-    pub fn occluded_batch(&self, count: usize, ray: impl Fn(usize) -> Ray, sink: impl FnMut(bool)) {
+    /// Results go to `sink` a window of rays at a time, so that the caller
+    /// copies them in one loop.
+    pub fn occluded_batch(
+        &self,
+        count: usize,
+        ray: impl Fn(usize) -> Ray,
+        sink: impl FnMut(&[bool]),
+    ) {
         self.occluded_batch_with(Isa::detect(), count, ray, sink);
     }
 
@@ -335,7 +342,7 @@ impl Bvh {
         ray: impl Fn(usize) -> Ray,
         mut sink: impl FnMut(Option<HitRecord>),
     ) {
-        wide::trace_batch::<false>(self, isa, count, ray, |found| {
+        wide::trace_batch(self, isa, count, ray, |found| {
             for &found in found {
                 sink(self.hit_record(found));
             }
@@ -356,7 +363,7 @@ impl Bvh {
         let mut hits = hits;
         let mut written = 0;
         let to_hit_record = self.hit_records();
-        wide::trace_batch::<false>(self, Isa::detect(), count, ray, |found| {
+        wide::trace_batch(self, Isa::detect(), count, ray, |found| {
             hits.write_from(written, found.iter().map(|&found| to_hit_record(found)));
             written += found.len();
         });
@@ -370,35 +377,23 @@ impl Bvh {
         isa: Isa,
         count: usize,
         ray: impl Fn(usize) -> Ray,
-        mut sink: impl FnMut(bool),
+        sink: impl FnMut(&[bool]),
     ) {
-        wide::trace_batch::<true>(self, isa, count, ray, |found| {
-            for found in found {
-                sink(found.is_some());
-            }
-        });
+        wide::occluded_batch(self, isa, count, ray, sink);
     }
 
     /// [`Bvh::intersect_closest`] on a chosen implementation of the wide traversal
     /// (panics if this CPU lacks it, see [`Isa::available`]).
     pub fn intersect_closest_with(&self, ray: &Ray, isa: Isa) -> Option<HitRecord> {
         let mut hit = None;
-        wide::trace_batch::<false>(self, isa, 1, |_| *ray, |found| hit = found[0]);
+        wide::trace_batch(self, isa, 1, |_| *ray, |found| hit = found[0]);
         self.hit_record(hit)
     }
 
     /// [`Bvh::occluded`] (up to `ray.tmax`) on a chosen implementation.
     pub fn occluded_with(&self, ray: &Ray, isa: Isa) -> bool {
         let mut blocked = false;
-        wide::trace_batch::<true>(
-            self,
-            isa,
-            1,
-            |_| *ray,
-            |found| {
-                blocked = found[0].is_some();
-            },
-        );
+        wide::occluded_batch(self, isa, 1, |_| *ray, |found| blocked = found[0]);
         blocked
     }
 

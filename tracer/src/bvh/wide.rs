@@ -22,6 +22,7 @@ use super::{Bvh, BvhChild, BvhNode, BvhTriangle, PreparedRay, Ray, ROBUST_FAR_SC
 use packet::{is_packet, packet_key, single_rays_below, trace_packet, PacketStack, MAX_PACKET};
 
 use rayon::prelude::*;
+use std::marker::PhantomData;
 
 mod packet;
 
@@ -423,11 +424,12 @@ impl Isa {
 /// `(leaf-order triangle, t, u, v)`.
 pub(super) type Found = Option<(usize, f32, f32, f32)>;
 
-/// Traces a batch of rays: `ray(i)` for `i` in `0..count`, results to `sink` in
-/// order, a packet's worth (up to [`MAX_PACKET`]) or an any-hit window's at a
-/// time, so that the caller's per-result work runs in one loop and not behind
-/// a call per ray. Dead rays (`tmax` not above 0) are not traversed.
-pub(super) fn trace_batch<const ANY_HIT: bool>(
+/// Traces a batch of rays for their closest hits: `ray(i)` for `i` in
+/// `0..count`, results to `sink` in order, a packet's worth (up to
+/// [`MAX_PACKET`]) at a time, so that the caller's per-result work runs in one
+/// loop and not behind a call per ray. Dead rays (`tmax` not above 0) are not
+/// traversed.
+pub(super) fn trace_batch(
     bvh: &Bvh,
     isa: Isa,
     count: usize,
@@ -435,20 +437,44 @@ pub(super) fn trace_batch<const ANY_HIT: bool>(
     sink: impl FnMut(&[Found]),
 ) {
     let ray = |index| bvh.to_bvh_space(&ray(index));
+    dispatch(isa, Batch::<_, _, ClosestHits>::new(bvh, count, ray, sink));
+}
+
+/// Whether each of the rays `ray(0..count)` is blocked (any hit), to `sink` in
+/// order, an any-hit window's worth at a time ([`AnyHitWindow::trace`]). Dead rays
+/// (`tmax` not above 0) are not traversed and never blocked.
+pub(super) fn occluded_batch(
+    bvh: &Bvh,
+    isa: Isa,
+    count: usize,
+    ray: impl Fn(usize) -> Ray,
+    sink: impl FnMut(&[bool]),
+) {
+    let ray = |index| bvh.to_bvh_space(&ray(index));
+    dispatch(isa, Batch::<_, _, AnyHits>::new(bvh, count, ray, sink));
+}
+
+/// A batch's traversal on the lanes an [`Isa`] gives: `S` tests boxes, `T`
+/// triangles.
+trait BatchJob {
+    fn run<S: Lanes8, T: Lanes>(self, boxes: S, triangles: T);
+}
+
+fn dispatch(isa: Isa, job: impl BatchJob) {
     match isa {
         #[cfg(target_arch = "x86_64")]
         Isa::Avx512 => {
             let lanes = super::simd::Avx512::detect().expect("AVX-512 is not available");
             // SAFETY: `lanes` proves the CPU has the features.
-            unsafe { batch_avx512::<ANY_HIT>(lanes, bvh, count, ray, sink) }
+            unsafe { run_avx512(lanes, job) }
         }
         #[cfg(target_arch = "x86_64")]
         Isa::Avx2 => {
             let lanes = super::simd::Avx2::detect().expect("AVX2 is not available");
             // SAFETY: `lanes` proves the CPU has the features.
-            unsafe { batch_avx2::<ANY_HIT>(lanes, bvh, count, ray, sink) }
+            unsafe { run_avx2(lanes, job) }
         }
-        Isa::Portable => batch::<_, _, ANY_HIT>(Portable, Portable, bvh, count, ray, sink),
+        Isa::Portable => job.run(Portable, Portable),
         #[allow(unreachable_patterns)]
         _ => panic!("{isa:?} is not available on this CPU"),
     }
@@ -456,26 +482,14 @@ pub(super) fn trace_batch<const ANY_HIT: bool>(
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,avx512f,avx512vl")]
-unsafe fn batch_avx512<const ANY_HIT: bool>(
-    lanes: super::simd::Avx512,
-    bvh: &Bvh,
-    count: usize,
-    ray: impl Fn(usize) -> Ray,
-    sink: impl FnMut(&[Found]),
-) {
-    batch::<_, _, ANY_HIT>(lanes, lanes.x16(), bvh, count, ray, sink)
+unsafe fn run_avx512(lanes: super::simd::Avx512, job: impl BatchJob) {
+    job.run(lanes, lanes.x16())
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn batch_avx2<const ANY_HIT: bool>(
-    lanes: super::simd::Avx2,
-    bvh: &Bvh,
-    count: usize,
-    ray: impl Fn(usize) -> Ray,
-    sink: impl FnMut(&[Found]),
-) {
-    batch::<_, _, ANY_HIT>(lanes, lanes, bvh, count, ray, sink)
+unsafe fn run_avx2(lanes: super::simd::Avx2, job: impl BatchJob) {
+    job.run(lanes, lanes)
 }
 
 /// Rays an any-hit batch sorts by [`packet_key`] at a time.
@@ -484,9 +498,6 @@ const ANY_HIT_WINDOW: usize = 1024;
 /// Values a [`packet_key`] can take (5 bits).
 const PACKET_KEYS: usize = 32;
 
-/// A key no live ray has (dominant axes are 0 to 2).
-const DEAD_KEY: usize = 3;
-
 /// What fills the unused places of ray arrays: a dead ray.
 const UNUSED_RAY: Ray = Ray {
     origin: glam::Vec3::ZERO,
@@ -494,40 +505,47 @@ const UNUSED_RAY: Ray = Ray {
     tmax: 0.0,
 };
 
-/// `S` tests boxes, `T` triangles. Closest-hit batches go `T::N` rays at a time
-/// as a packet where they can ([`is_packet`]: the coherent rays of a camera),
-/// else one by one; any-hit batches as in [`any_hit_window`].
-#[inline(always)]
-fn batch<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
-    boxes: S,
-    triangles: T,
-    bvh: &Bvh,
+/// Rays `ray(0..count)` of one kind of query ([`ClosestHits`] or [`AnyHits`]),
+/// answers to `sink`.
+struct Batch<'a, R, K, Query> {
+    bvh: &'a Bvh,
     count: usize,
-    ray: impl Fn(usize) -> Ray,
-    mut sink: impl FnMut(&[Found]),
-) {
-    let mut stack = Stack::new();
-    let mut index = 0;
-    if ANY_HIT && count >= T::N {
-        let mut packet_stack = PacketStack::new();
-        while index < count {
-            let len = (count - index).min(ANY_HIT_WINDOW);
-            let found = any_hit_window(
-                boxes,
-                triangles,
-                bvh,
-                |i| ray(index + i),
-                len,
-                &mut packet_stack,
-                &mut stack,
-            );
-            sink(&found[..len]);
-            index += len;
+    ray: R,
+    sink: K,
+    query: PhantomData<Query>,
+}
+
+impl<'a, R, K, Query> Batch<'a, R, K, Query> {
+    fn new(bvh: &'a Bvh, count: usize, ray: R, sink: K) -> Self {
+        Batch {
+            bvh,
+            count,
+            ray,
+            sink,
+            query: PhantomData,
         }
-        return;
     }
-    if !ANY_HIT && count >= T::N {
+
+    fn into_parts(self) -> (&'a Bvh, usize, R, K) {
+        (self.bvh, self.count, self.ray, self.sink)
+    }
+}
+
+/// A [`Batch`] of closest-hit queries, answered as [`Found`]s.
+struct ClosestHits;
+
+/// A [`Batch`] of any-hit queries, answered as whether each ray is blocked.
+struct AnyHits;
+
+impl<R: Fn(usize) -> Ray, K: FnMut(&[Found])> BatchJob for Batch<'_, R, K, ClosestHits> {
+    /// `T::N` rays at a time as a packet where they can ([`is_packet`]: the
+    /// coherent rays of a camera), else one by one.
+    #[inline(always)]
+    fn run<S: Lanes8, T: Lanes>(self, boxes: S, triangles: T) {
+        let (bvh, count, ray, mut sink) = self.into_parts();
+        let mut stack = Stack::new();
         let mut packet_stack = PacketStack::new();
+        let mut index = 0;
         while count - index >= T::N {
             let mut rays = [UNUSED_RAY; MAX_PACKET];
             for (i, slot) in rays[..T::N].iter_mut().enumerate() {
@@ -547,91 +565,157 @@ fn batch<S: Lanes8, T: Lanes, const ANY_HIT: bool>(
                 );
             } else {
                 for (&ray, result) in rays.iter().zip(&mut found) {
-                    *result = trace::<S, T, ANY_HIT>(boxes, triangles, bvh, ray, &mut stack);
+                    *result = trace::<S, T, false>(boxes, triangles, bvh, ray, &mut stack);
                 }
             }
             sink(&found[..T::N]);
             index += T::N;
         }
-    }
-    // The rest (fewer than `T::N`) one by one.
-    let mut found = [None; MAX_PACKET];
-    let rest = count - index;
-    for (i, result) in found[..rest].iter_mut().enumerate() {
-        *result = trace::<S, T, ANY_HIT>(boxes, triangles, bvh, ray(index + i), &mut stack);
-    }
-    if rest > 0 {
-        sink(&found[..rest]);
+        // The rest (fewer than `T::N`) one by one.
+        let mut found = [None; MAX_PACKET];
+        let rest = count - index;
+        for (i, result) in found[..rest].iter_mut().enumerate() {
+            *result = trace::<S, T, false>(boxes, triangles, bvh, ray(index + i), &mut stack);
+        }
+        if rest > 0 {
+            sink(&found[..rest]);
+        }
     }
 }
 
-/// Any-hit rays `ray(0..len)` (`len` up to [`ANY_HIT_WINDOW`]), sorted by
-/// [`packet_key`] (their order kept within a key) and traced as packets of up
-/// to `T::N` rays of one key: shadow rays from neighbouring points to one
-/// light, or ambient-occlusion rays of one octant, start close together and
-/// share much of their way. Packets of a few rays go one by one. A ray's
-/// answer is the single-ray traversal's, whichever way it goes: any hit ends
-/// at the first triangle found, and which one does not matter.
-#[inline(always)]
-fn any_hit_window<S: Lanes8, T: Lanes>(
-    boxes: S,
-    triangles: T,
-    bvh: &Bvh,
-    ray: impl Fn(usize) -> Ray,
-    len: usize,
-    packet_stack: &mut PacketStack,
-    stack: &mut Stack,
-) -> [Found; ANY_HIT_WINDOW] {
-    let mut rays = [UNUSED_RAY; ANY_HIT_WINDOW];
-    let mut keys = [DEAD_KEY as u8; ANY_HIT_WINDOW];
-    // Positions of each key's rays: a counting sort.
-    let mut starts = [0usize; PACKET_KEYS + 1];
-    for (i, (slot, key)) in rays.iter_mut().zip(&mut keys).take(len).enumerate() {
-        *slot = ray(i);
-        if slot.tmax > 0.0 {
-            *key = packet_key(slot) as u8;
-        }
-        starts[*key as usize + 1] += 1;
-    }
-    for key in 0..PACKET_KEYS {
-        starts[key + 1] += starts[key];
-    }
-    let mut order = [0u16; ANY_HIT_WINDOW];
-    let mut next = starts;
-    for (i, &key) in keys[..len].iter().enumerate() {
-        order[next[key as usize]] = i as u16;
-        next[key as usize] += 1;
-    }
-    let mut found = [None; ANY_HIT_WINDOW];
-    for key in (0..PACKET_KEYS).filter(|&key| key != DEAD_KEY) {
-        for members in order[starts[key]..starts[key + 1]].chunks(T::N) {
-            if members.len() as u32 <= single_rays_below::<T>() {
-                for &i in members {
-                    found[i as usize] =
-                        trace::<S, T, true>(boxes, triangles, bvh, rays[i as usize], stack);
-                }
-                continue;
-            }
-            let mut packet = [UNUSED_RAY; MAX_PACKET];
-            for (slot, &i) in packet.iter_mut().zip(members) {
-                *slot = rays[i as usize];
-            }
-            let mut packet_found = [None; MAX_PACKET];
-            trace_packet::<S, T, true>(
+impl<R: Fn(usize) -> Ray, K: FnMut(&[bool])> BatchJob for Batch<'_, R, K, AnyHits> {
+    #[inline(always)]
+    fn run<S: Lanes8, T: Lanes>(self, boxes: S, triangles: T) {
+        let (bvh, count, ray, mut sink) = self.into_parts();
+        let mut stack = Stack::new();
+        let mut packet_stack = PacketStack::new();
+        let mut window = AnyHitWindow::new();
+        let mut index = 0;
+        while index < count {
+            let len = (count - index).min(ANY_HIT_WINDOW);
+            let blocked = window.trace(
                 boxes,
                 triangles,
                 bvh,
-                &packet[..members.len()],
-                packet_stack,
-                stack,
-                &mut packet_found,
+                |i| ray(index + i),
+                len,
+                &mut packet_stack,
+                &mut stack,
             );
-            for (&i, &hit) in members.iter().zip(&packet_found) {
-                found[i as usize] = hit;
-            }
+            sink(blocked);
+            index += len;
         }
     }
-    found
+}
+
+/// The places an any-hit window works in, kept from one window to the next so
+/// that each window initialises only what it uses.
+struct AnyHitWindow {
+    /// The window's live rays (`tmax > 0`), in window order.
+    rays: [Ray; ANY_HIT_WINDOW],
+    /// Where in the window each live ray is, and its [`packet_key`].
+    place: [u16; ANY_HIT_WINDOW],
+    keys: [u8; ANY_HIT_WINDOW],
+    /// Live rays by key (the positions in `rays`).
+    order: [u16; ANY_HIT_WINDOW],
+    blocked: [bool; ANY_HIT_WINDOW],
+}
+
+impl AnyHitWindow {
+    fn new() -> AnyHitWindow {
+        AnyHitWindow {
+            rays: [UNUSED_RAY; ANY_HIT_WINDOW],
+            place: [0; ANY_HIT_WINDOW],
+            keys: [0; ANY_HIT_WINDOW],
+            order: [0; ANY_HIT_WINDOW],
+            blocked: [false; ANY_HIT_WINDOW],
+        }
+    }
+
+    /// Any-hit rays `ray(0..len)` (`len` up to [`ANY_HIT_WINDOW`]): the live
+    /// ones sorted by [`packet_key`] (their order kept within a key) and traced
+    /// as packets of up to `T::N` rays of one key: shadow rays from
+    /// neighbouring points to one light, or ambient-occlusion rays of one
+    /// octant, start close together and share much of their way. Packets of a
+    /// few rays go one by one. A ray's answer is the single-ray traversal's,
+    /// whichever way it goes: any hit ends at the first triangle found, and
+    /// which one does not matter. Dead rays are only marked not blocked: where
+    /// most of the frame is background, most rays are.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn trace<S: Lanes8, T: Lanes>(
+        &mut self,
+        boxes: S,
+        triangles: T,
+        bvh: &Bvh,
+        ray: impl Fn(usize) -> Ray,
+        len: usize,
+        packet_stack: &mut PacketStack,
+        stack: &mut Stack,
+    ) -> &[bool] {
+        // Positions of each key's rays: a counting sort.
+        let mut starts = [0usize; PACKET_KEYS + 1];
+        let mut live = 0;
+        for i in 0..len {
+            let ray = ray(i);
+            // False for NaN too.
+            if ray.tmax > 0.0 {
+                let key = packet_key(&ray) as usize;
+                self.rays[live] = ray;
+                self.place[live] = i as u16;
+                self.keys[live] = key as u8;
+                starts[key + 1] += 1;
+                live += 1;
+            }
+        }
+        self.blocked[..len].fill(false);
+        if live < T::N {
+            for (&ray, &place) in self.rays[..live].iter().zip(&self.place[..live]) {
+                self.blocked[place as usize] =
+                    trace::<S, T, true>(boxes, triangles, bvh, ray, stack).is_some();
+            }
+            return &self.blocked[..len];
+        }
+        for key in 0..PACKET_KEYS {
+            starts[key + 1] += starts[key];
+        }
+        let mut next = starts;
+        for (j, &key) in self.keys[..live].iter().enumerate() {
+            self.order[next[key as usize]] = j as u16;
+            next[key as usize] += 1;
+        }
+        for key in 0..PACKET_KEYS {
+            for members in self.order[starts[key]..starts[key + 1]].chunks(T::N) {
+                if members.len() as u32 <= single_rays_below::<T>() {
+                    for &j in members {
+                        let j = j as usize;
+                        self.blocked[self.place[j] as usize] =
+                            trace::<S, T, true>(boxes, triangles, bvh, self.rays[j], stack)
+                                .is_some();
+                    }
+                    continue;
+                }
+                let mut packet = [UNUSED_RAY; MAX_PACKET];
+                for (slot, &j) in packet.iter_mut().zip(members) {
+                    *slot = self.rays[j as usize];
+                }
+                let mut packet_found = [None; MAX_PACKET];
+                trace_packet::<S, T, true>(
+                    boxes,
+                    triangles,
+                    bvh,
+                    &packet[..members.len()],
+                    packet_stack,
+                    stack,
+                    &mut packet_found,
+                );
+                for (&j, hit) in members.iter().zip(&packet_found) {
+                    self.blocked[self.place[j as usize] as usize] = hit.is_some();
+                }
+            }
+        }
+        &self.blocked[..len]
+    }
 }
 
 /// One ray, dispatched on its dominant axis like the binary traversal. Dead rays

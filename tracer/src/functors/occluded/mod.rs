@@ -36,7 +36,11 @@ fn run_cpu(
     let blocked = outputs[0].as_bool_mut();
     blocked.reserve(rays.len());
     // Dead rays (tmax <= 0) are never blocked.
-    bvh.occluded_batch(rays.len(), |index| rays.get(index), |hit| blocked.push(hit));
+    bvh.occluded_batch(
+        rays.len(),
+        |index| rays.get(index),
+        |window| blocked.extend_from_slice(window),
+    );
     Ok(())
 }
 
