@@ -587,21 +587,11 @@ impl<R: Fn(usize) -> Ray, K: FnMut(&[bool])> BatchJob for Batch<'_, R, K, AnyHit
     #[inline(always)]
     fn run<S: Lanes8, T: Lanes>(self, boxes: S, triangles: T) {
         let (bvh, count, ray, mut sink) = self.into_parts();
-        let mut stack = Stack::new();
-        let mut packet_stack = PacketStack::new();
         let mut window = AnyHitWindow::new();
         let mut index = 0;
         while index < count {
             let len = (count - index).min(ANY_HIT_WINDOW);
-            let blocked = window.trace(
-                boxes,
-                triangles,
-                bvh,
-                |i| ray(index + i),
-                len,
-                &mut packet_stack,
-                &mut stack,
-            );
+            let blocked = window.trace(boxes, triangles, bvh, |i| ray(index + i), len);
             sink(blocked);
             index += len;
         }
@@ -611,6 +601,8 @@ impl<R: Fn(usize) -> Ray, K: FnMut(&[bool])> BatchJob for Batch<'_, R, K, AnyHit
 /// The places an any-hit window works in, kept from one window to the next so
 /// that each window initialises only what it uses.
 struct AnyHitWindow {
+    stack: Stack,
+    packet_stack: PacketStack,
     /// The window's live rays (`tmax > 0`), in window order.
     rays: [Ray; ANY_HIT_WINDOW],
     /// Where in the window each live ray is, and its [`packet_key`].
@@ -624,6 +616,8 @@ struct AnyHitWindow {
 impl AnyHitWindow {
     fn new() -> AnyHitWindow {
         AnyHitWindow {
+            stack: Stack::new(),
+            packet_stack: PacketStack::new(),
             rays: [UNUSED_RAY; ANY_HIT_WINDOW],
             place: [0; ANY_HIT_WINDOW],
             keys: [0; ANY_HIT_WINDOW],
@@ -641,7 +635,6 @@ impl AnyHitWindow {
     /// whichever way it goes: any hit ends at the first triangle found, and
     /// which one does not matter. Dead rays are only marked not blocked: where
     /// most of the frame is background, most rays are.
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn trace<S: Lanes8, T: Lanes>(
         &mut self,
@@ -650,8 +643,6 @@ impl AnyHitWindow {
         bvh: &Bvh,
         ray: impl Fn(usize) -> Ray,
         len: usize,
-        packet_stack: &mut PacketStack,
-        stack: &mut Stack,
     ) -> &[bool] {
         // Positions of each key's rays: a counting sort.
         let mut starts = [0usize; PACKET_KEYS + 1];
@@ -669,13 +660,6 @@ impl AnyHitWindow {
             }
         }
         self.blocked[..len].fill(false);
-        if live < T::N {
-            for (&ray, &place) in self.rays[..live].iter().zip(&self.place[..live]) {
-                self.blocked[place as usize] =
-                    trace::<S, T, true>(boxes, triangles, bvh, ray, stack).is_some();
-            }
-            return &self.blocked[..len];
-        }
         for key in 0..PACKET_KEYS {
             starts[key + 1] += starts[key];
         }
@@ -689,9 +673,14 @@ impl AnyHitWindow {
                 if members.len() as u32 <= single_rays_below::<T>() {
                     for &j in members {
                         let j = j as usize;
-                        self.blocked[self.place[j] as usize] =
-                            trace::<S, T, true>(boxes, triangles, bvh, self.rays[j], stack)
-                                .is_some();
+                        self.blocked[self.place[j] as usize] = trace::<S, T, true>(
+                            boxes,
+                            triangles,
+                            bvh,
+                            self.rays[j],
+                            &mut self.stack,
+                        )
+                        .is_some();
                     }
                     continue;
                 }
@@ -705,8 +694,8 @@ impl AnyHitWindow {
                     triangles,
                     bvh,
                     &packet[..members.len()],
-                    packet_stack,
-                    stack,
+                    &mut self.packet_stack,
+                    &mut self.stack,
                     &mut packet_found,
                 );
                 for (&j, hit) in members.iter().zip(&packet_found) {
