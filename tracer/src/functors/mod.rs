@@ -272,14 +272,15 @@ impl<'a> RayWriter<'a> {
         Ok(writer)
     }
 
+    /// Overwrites record `index` (one already written).
     #[inline(always)]
-    pub fn push(&mut self, ray: RayRecord) {
-        self.origin.push(ray.origin);
-        self.dir.push(ray.dir);
-        self.tmax.push(ray.tmax);
-        self.sample.push(ray.sample);
-        self.weight.push(ray.weight);
-        self.depth.push(ray.depth);
+    pub fn set(&mut self, index: usize, ray: RayRecord) {
+        self.origin[index] = ray.origin;
+        self.dir[index] = ray.dir;
+        self.tmax[index] = ray.tmax;
+        self.sample[index] = ray.sample;
+        self.weight[index] = ray.weight;
+        self.depth[index] = ray.depth;
     }
 
     /// Appends `len` records, record `i` being `ray(i)`, in one pass that writes
@@ -311,34 +312,6 @@ impl<'a> RayWriter<'a> {
             commit(self.weight, len);
             commit(self.depth, len);
         }
-    }
-}
-
-impl RayWriter<'_> {
-    /// Appends `groups * lanes` records in one pass, as [`RayWriter::extend_with`]:
-    /// `group(g)` is called once per group, before its lanes, and record
-    /// `g * lanes + lane` is what the closure it returns gives for `lane`. What a
-    /// fan-out's rays share (their surface, origin and frame) is computed once.
-    #[inline(always)]
-    pub fn extend_groups<Lanes: FnMut(usize) -> RayRecord>(
-        &mut self,
-        groups: usize,
-        lanes: usize,
-        mut group: impl FnMut(usize) -> Lanes,
-    ) {
-        if groups == 0 || lanes == 0 {
-            return;
-        }
-        let (mut index, mut lane) = (0, 0);
-        let mut current = group(0);
-        self.extend_with(groups * lanes, |_| {
-            if lane == lanes {
-                (index, lane) = (index + 1, 0);
-                current = group(index);
-            }
-            lane += 1;
-            current(lane - 1)
-        });
     }
 }
 
@@ -419,19 +392,21 @@ impl SurfaceRecord {
     pub fn offset_origin(&self, epsilon: f32) -> Vec3 {
         self.position + self.geometric * epsilon
     }
+}
 
-    /// `dir` turned into the geometric normal's side of the surface: mirrored in
-    /// the triangle's plane when it points into (or along) the surface, unchanged
-    /// otherwise. Directions about the shading normal can point into the surface
-    /// where the shading normal leans away from the geometric one.
-    #[inline]
-    pub fn above_surface(&self, dir: Vec3) -> Vec3 {
-        let below = dir.dot(self.geometric);
-        if below > 0.0 {
-            dir
-        } else {
-            dir - 2.0 * below * self.geometric
-        }
+/// `dir` turned onto the side of the plane of unit normal `geometric` (a
+/// surface's geometric normal): mirrored in the plane when it points into (or
+/// along) it, unchanged otherwise. Directions about a shading normal can
+/// point into the surface where it leans away from the geometric one.
+#[inline]
+pub(crate) fn above_plane(dir: Vec3, geometric: Vec3) -> Vec3 {
+    let below = dir.dot(geometric);
+    // Both sides computed and one chosen, which batches of rays vectorise.
+    let mirrored = dir - 2.0 * below * geometric;
+    if below > 0.0 {
+        dir
+    } else {
+        mirrored
     }
 }
 
@@ -849,7 +824,7 @@ pub(crate) mod test_support {
         let ty = ElemType::Record(records.find("Ray").unwrap());
         let mut column = Column::with_capacity(ty, 0, records);
         let mut writer = RayWriter::new(&mut column, rays.len()).unwrap();
-        rays.iter().for_each(|&ray| writer.push(ray));
+        writer.extend_with(rays.len(), |i| rays[i]);
         column
     }
 
@@ -963,22 +938,23 @@ mod tests {
     use super::RayWriter;
     use glam::Vec3;
 
-    /// A fan-out's groups come out group after group, lane after lane, and
-    /// each group's shared part is made once, before its lanes.
+    /// Records come out in the order written, a few at a time, and `set`
+    /// replaces one in place.
     #[test]
-    fn grouped_rays_are_written_in_group_then_lane_order() {
+    fn rays_are_appended_in_order_and_set_in_place() {
         let fixture = Fixture::new();
         let mut column = fixture.rays(&[]);
-        let mut groups_made = Vec::new();
         let mut writer = RayWriter::new(&mut column, 0).unwrap();
-        writer.extend_groups(3, 2, |group| {
-            groups_made.push(group);
-            move |lane| ray(Vec3::ZERO, Vec3::Z, 1.0, (10 * group + lane) as u32)
-        });
-        writer.extend_groups(0, 2, |_| |_| unreachable!("no groups"));
-        writer.extend_groups(2, 0, |_| |_| unreachable!("no lanes"));
-        let samples: Vec<u32> = read_rays(&column).iter().map(|r| r.sample).collect();
-        assert_eq!(samples, [0, 1, 10, 11, 20, 21]);
-        assert_eq!(groups_made, [0, 1, 2]);
+        for group in 0..3 {
+            writer.extend_with(2, |lane| {
+                ray(Vec3::ZERO, Vec3::Z, 1.0, (10 * group + lane) as u32)
+            });
+        }
+        writer.extend_with(0, |_| unreachable!("no records"));
+        writer.set(3, ray(Vec3::ONE, Vec3::X, 2.0, 99));
+        let rays = read_rays(&column);
+        let samples: Vec<u32> = rays.iter().map(|r| r.sample).collect();
+        assert_eq!(samples, [0, 1, 10, 99, 20, 21]);
+        assert_eq!(rays[3], ray(Vec3::ONE, Vec3::X, 2.0, 99));
     }
 }

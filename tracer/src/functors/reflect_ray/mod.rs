@@ -78,11 +78,15 @@ fn run_cpu(
     }
     let mut out = RayWriter::new(&mut outputs[0], surfaces.len())?;
     out.extend_with(surfaces.len(), |index| {
+        if !reflects(index) {
+            // Two more of the surface's fields read, not all ten.
+            return RayRecord::dead(
+                surfaces.sample[index],
+                surfaces.depth[index].saturating_add(1),
+            );
+        }
         let surface = surfaces.get(index);
         let depth = surface.depth.saturating_add(1);
-        if !reflects(index) {
-            return RayRecord::dead(surface.sample, depth);
-        }
         let reflectivity = materials[surface.material as usize].reflectivity;
         if reflectivity <= 0.0 {
             return RayRecord::dead(surface.sample, depth);

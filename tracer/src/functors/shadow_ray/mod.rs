@@ -62,14 +62,16 @@ fn run_cpu(
     let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "shadowRay")?;
     let surfaces = SurfaceColumns::new(&inputs[0]);
     let mut out = RayWriter::new(&mut outputs[0], surfaces.len() * lanes)?;
-    out.extend_groups(surfaces.len(), lanes, |index| {
+    for index in 0..surfaces.len() {
+        let dead = RayRecord::dead(surfaces.sample[index], surfaces.depth[index]);
+        if !surfaces.hit[index] {
+            // A miss reads two more of the surface's fields, not all ten.
+            out.extend_with(lanes, |_| dead);
+            continue;
+        }
         let surface = surfaces.get(index);
         let origin = surface.offset_origin(epsilon);
-        move |lane| {
-            let dead = RayRecord::dead(surface.sample, surface.depth);
-            if !surface.hit {
-                return dead;
-            }
+        out.extend_with(lanes, |lane| {
             let to_light = lights[lane].position - origin;
             let distance = to_light.length();
             let tmax = distance - epsilon;
@@ -84,8 +86,8 @@ fn run_cpu(
                 weight: surface.weight,
                 depth: surface.depth,
             }
-        }
-    });
+        });
+    }
     Ok(())
 }
 
