@@ -103,8 +103,8 @@ fn run_cpu(
 /// Live rays made eight at a time: a ray is a long chain of dependent
 /// operations (four hashes, two square roots, a division), and the loops over
 /// a batch become vector instructions that make several side by side (the
-/// functor took 0.90–0.94 of the time of the same code one ray at a time,
-/// docs/benchmarks.md). Each ray is [`random_pair`], [`Hemisphere`] and
+/// functor took 0.90–0.94 of the time it took one ray at a time with libm's
+/// `sincosf`, docs/benchmarks.md). Each ray is [`random_pair`], [`Hemisphere`] and
 /// [`above_plane`] of its own surface and lane.
 const LIVE_BATCH: usize = 8;
 
