@@ -125,6 +125,9 @@ impl LiveRays {
         lanes: usize,
         out: &mut RayWriter<'_>,
     ) {
+        if self.len == 0 {
+            return;
+        }
         // The inputs, gathered into one array per scalar (unused slots repeat
         // the first ray, so the loops below always run over the whole batch).
         let mut sample = [0; LIVE_BATCH];
@@ -400,6 +403,12 @@ mod tests {
     #[test]
     fn misses_and_zero_range_give_dead_rays() {
         let fixture = Fixture::new();
+        // No surfaces, and no hit among them: nothing live to make.
+        let none = fixture.surfaces(&[]);
+        let out = fixture
+            .run_grouped("occRayGen", &[], 4, 0, &[none.view()])
+            .unwrap();
+        assert!(read_rays(&out[0]).is_empty());
         let surfaces = fixture.surfaces(&[SurfaceRecord::miss(4, Vec3::ONE, 2)]);
         let out = fixture
             .run_grouped("occRayGen", &[], 3, 0, &[surfaces.view()])
