@@ -18,7 +18,8 @@ use crate::functors::wgsl::{
     diagonal_failure, random_module, sampling_module, surface_module, vector_module, TwinParts,
 };
 use crate::functors::{
-    above_plane, named_f32, scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON,
+    above_plane, named_f32, offset_origin, scene_diagonal, RayRecord, RayWriter, SurfaceColumns,
+    SURFACE_EPSILON,
 };
 use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
@@ -26,6 +27,7 @@ use dpp_runtime::{
     RecordId, Signature,
 };
 use glam::Vec3;
+use multiversion::multiversion;
 use std::sync::Arc;
 
 pub fn functor(surface: RecordId, ray: RecordId) -> Arc<dyn Functor> {
@@ -76,27 +78,27 @@ fn run_cpu(
     let surfaces = SurfaceColumns::new(&inputs[0]);
     let lanes = ctx.group;
     let mut out = RayWriter::new(&mut outputs[0], surfaces.len() * lanes)?;
-    // Every ray starts dead, reading three of its surface's ten fields; the
-    // live ones are then made in batches and written over their places.
-    for index in 0..surfaces.len() {
-        let dead = RayRecord::dead(surfaces.sample[index], surfaces.depth[index]);
-        out.extend_with(lanes, |_| dead);
-    }
-    if !reaches {
-        return Ok(());
-    }
+    // A miss's rays are dead and read three of its surface's ten fields; a
+    // hit's are made in batches, which are appended before the next dead rays
+    // so that every ray lands at its place.
     let mut batch = LiveRays::default();
-    for index in (0..surfaces.len()).filter(|&index| surfaces.hit[index]) {
-        for lane in 0..lanes {
-            batch.surface[batch.len] = index;
-            batch.lane[batch.len] = lane as u32;
-            batch.len += 1;
-            if batch.len == LIVE_BATCH {
-                batch.make(&surfaces, epsilon, length, lanes, &mut out);
+    for index in 0..surfaces.len() {
+        if reaches && surfaces.hit[index] {
+            for lane in 0..lanes {
+                batch.surface[batch.len] = index;
+                batch.lane[batch.len] = lane as u32;
+                batch.len += 1;
+                if batch.len == LIVE_BATCH {
+                    batch.make(&surfaces, epsilon, length, &mut out);
+                }
             }
+        } else {
+            batch.make(&surfaces, epsilon, length, &mut out);
+            let dead = RayRecord::dead(surfaces.sample[index], surfaces.depth[index]);
+            out.extend_with(lanes, |_| dead);
         }
     }
-    batch.make(&surfaces, epsilon, length, lanes, &mut out);
+    batch.make(&surfaces, epsilon, length, &mut out);
     Ok(())
 }
 
@@ -116,64 +118,80 @@ struct LiveRays {
 }
 
 impl LiveRays {
-    /// Writes the batch's rays over their places in `out` and empties it.
+    /// Appends the batch's rays to `out` and empties it.
     fn make(
         &mut self,
         surfaces: &SurfaceColumns<'_>,
         epsilon: f32,
         length: f32,
-        lanes: usize,
         out: &mut RayWriter<'_>,
     ) {
         if self.len == 0 {
             return;
         }
-        // The inputs, gathered into one array per scalar (unused slots repeat
-        // the first ray, so the loops below always run over the whole batch).
-        let mut sample = [0; LIVE_BATCH];
-        let mut depth = [0; LIVE_BATCH];
-        let mut normal = [[0.0; LIVE_BATCH]; 3];
-        let mut geometric = [[0.0; LIVE_BATCH]; 3];
-        for slot in 0..LIVE_BATCH {
-            let index = self.surface[if slot < self.len { slot } else { 0 }];
-            sample[slot] = surfaces.sample[index];
-            depth[slot] = surfaces.depth[index];
-            for axis in 0..3 {
-                normal[axis][slot] = surfaces.normal[index][axis];
-                geometric[axis][slot] = surfaces.geometric[index][axis];
-            }
-        }
-        let mut dir = [[0.0; LIVE_BATCH]; 3];
-        for slot in 0..LIVE_BATCH {
-            let (u1, u2) = random_pair(sample[slot], depth[slot], self.lane[slot]);
-            let at = |axes: &[[f32; LIVE_BATCH]; 3]| {
-                Vec3::new(axes[0][slot], axes[1][slot], axes[2][slot])
-            };
-            let made = above_plane(
-                Hemisphere::about(at(&normal)).cosine_direction(u1, u2),
-                at(&geometric),
-            );
-            for axis in 0..3 {
-                dir[axis][slot] = made[axis];
-            }
-        }
-        let live = self.surface.iter().zip(&self.lane).take(self.len);
-        for (slot, (&index, &lane)) in live.enumerate() {
-            let surface = surfaces.get(index);
-            out.set(
-                index * lanes + lane as usize,
-                RayRecord {
-                    origin: surface.offset_origin(epsilon),
-                    dir: Vec3::new(dir[0][slot], dir[1][slot], dir[2][slot]),
-                    tmax: length,
-                    sample: surface.sample,
-                    weight: surface.weight,
-                    depth: surface.depth,
-                },
-            );
-        }
+        make_live_rays(self, surfaces, epsilon, length, out);
         self.len = 0;
     }
+}
+
+/// [`LiveRays::make`], compiled for AVX2 too where the CPU has it: eight rays
+/// are then one vector register (the same IEEE operations, so the same rays).
+#[multiversion(targets("x86_64+avx2"))]
+fn make_live_rays(
+    batch: &LiveRays,
+    surfaces: &SurfaceColumns<'_>,
+    epsilon: f32,
+    length: f32,
+    out: &mut RayWriter<'_>,
+) {
+    type Lanes = [f32; LIVE_BATCH];
+    // The inputs, gathered into one array per scalar (unused slots repeat
+    // the first ray, so the loops below always run over the whole batch).
+    let mut sample = [0; LIVE_BATCH];
+    let mut depth = [0; LIVE_BATCH];
+    let mut position = [[0.0; LIVE_BATCH]; 3];
+    let mut normal = [[0.0; LIVE_BATCH]; 3];
+    let mut geometric = [[0.0; LIVE_BATCH]; 3];
+    let mut weight = [[0.0; LIVE_BATCH]; 3];
+    for slot in 0..LIVE_BATCH {
+        let index = batch.surface[if slot < batch.len { slot } else { 0 }];
+        sample[slot] = surfaces.sample[index];
+        depth[slot] = surfaces.depth[index];
+        for (axes, column) in [
+            (&mut position, surfaces.position),
+            (&mut normal, surfaces.normal),
+            (&mut geometric, surfaces.geometric),
+            (&mut weight, surfaces.weight),
+        ] {
+            for axis in 0..3 {
+                axes[axis][slot] = column[index][axis];
+            }
+        }
+    }
+    let at =
+        |axes: &[Lanes; 3], slot: usize| Vec3::new(axes[0][slot], axes[1][slot], axes[2][slot]);
+    let mut origin = [[0.0; LIVE_BATCH]; 3];
+    let mut dir = [[0.0; LIVE_BATCH]; 3];
+    for slot in 0..LIVE_BATCH {
+        let (u1, u2) = random_pair(sample[slot], depth[slot], batch.lane[slot]);
+        let made = above_plane(
+            Hemisphere::about(at(&normal, slot)).cosine_direction(u1, u2),
+            at(&geometric, slot),
+        );
+        let start = offset_origin(at(&position, slot), at(&geometric, slot), epsilon);
+        for axis in 0..3 {
+            dir[axis][slot] = made[axis];
+            origin[axis][slot] = start[axis];
+        }
+    }
+    out.extend_with(batch.len, |slot| RayRecord {
+        origin: at(&origin, slot),
+        dir: at(&dir, slot),
+        tmax: length,
+        sample: sample[slot],
+        weight: at(&weight, slot),
+        depth: depth[slot],
+    });
 }
 
 /// The PCG hash (Jarzynski and Olano, "Hash Functions for GPU Rendering", 2020).
@@ -275,6 +293,19 @@ mod tests {
         }
     }
 
+    /// The rays of `surfaces`, the first of which is element `first` of the
+    /// whole array, with `fanout` lanes each.
+    fn rays(
+        fixture: &Fixture,
+        surfaces: &[SurfaceRecord],
+        fanout: usize,
+        first: usize,
+    ) -> Vec<RayRecord> {
+        let column = fixture.surfaces(surfaces);
+        let out = fixture.run_grouped("occRayGen", &[], fanout, first, &[column.view()]);
+        read_rays(&out.unwrap()[0])
+    }
+
     #[test]
     fn directions_lie_in_the_hemisphere_and_are_cosine_weighted() {
         let fixture = Fixture::new();
@@ -369,24 +400,9 @@ mod tests {
             surface(Vec3::Z, 1, 0),
             surface(Vec3::Z, 0, 1),
         ];
-        let all = fixture.surfaces(&records);
-        let run = |surfaces: &[SurfaceRecord], first: usize| {
-            let column = fixture.surfaces(surfaces);
-            read_rays(
-                &fixture
-                    .run_grouped("occRayGen", &[], 4, first, &[column.view()])
-                    .unwrap()[0],
-            )
-        };
+        let run = |surfaces: &[SurfaceRecord], first: usize| rays(&fixture, surfaces, 4, first);
         let whole = run(&records, 0);
-        assert_eq!(
-            whole,
-            read_rays(
-                &fixture
-                    .run_grouped("occRayGen", &[], 4, 0, &[all.view()])
-                    .unwrap()[0]
-            )
-        );
+        assert_eq!(whole, run(&records, 0));
         // The same rays when the surfaces come in other chunks.
         let mut split = run(&records[..1], 0);
         split.extend(run(&records[1..], 1));
@@ -398,6 +414,26 @@ mod tests {
                 assert_ne!(directions[i], directions[j], "rays {i} and {j}");
             }
         }
+    }
+
+    /// Hits and misses interleaved, with a fanout that splits surfaces across
+    /// batches: each surface's rays are those it makes alone, at its place.
+    #[test]
+    fn rays_of_hits_and_misses_land_at_their_surfaces_places() {
+        let fixture = Fixture::new();
+        let records: Vec<SurfaceRecord> = (0..23)
+            .map(|index| match index % 5 {
+                1 | 4 => SurfaceRecord::miss(index, Vec3::ONE, 1),
+                _ => surface(Vec3::new(0.3, -0.2, 1.0).normalize(), index, 1),
+            })
+            .collect();
+        let run = |surfaces: &[SurfaceRecord], first: usize| rays(&fixture, surfaces, 3, first);
+        let whole = run(&records, 0);
+        let alone: Vec<RayRecord> = (0..records.len())
+            .flat_map(|index| run(&records[index..=index], index))
+            .collect();
+        assert_eq!(whole, alone);
+        assert_eq!(whole.iter().filter(|ray| ray.tmax > 0.0).count(), 3 * 14);
     }
 
     #[test]
