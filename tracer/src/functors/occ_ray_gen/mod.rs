@@ -212,7 +212,8 @@ pub(crate) fn random_pair(sample: u32, depth: u32, lane: u32) -> (f32, f32) {
 }
 
 /// The orthonormal frame about a unit normal (Duff et al., "Building an
-/// Orthonormal Basis, Revisited", 2017), made once for a surface's lanes.
+/// Orthonormal Basis, Revisited", 2017), built for each ray of a batch, side
+/// by side in vector lanes.
 pub(crate) struct Hemisphere {
     tangent: Vec3,
     bitangent: Vec3,
