@@ -1,7 +1,8 @@
 //! Lane-parallel f32 arithmetic for the wide traversal, behind two traits: [`Lanes`]
 //! (any width, for triangle tests) and [`Lanes8`] (eight lanes, for box tests).
 //! Implementations: AVX-512 (eight lanes with compares into mask registers, and
-//! sixteen lanes for triangles), AVX2, and a portable one (plain lane loops).
+//! sixteen lanes for triangles), AVX2 (eight lanes, and sixteen as two halves),
+//! and a portable one (plain lane loops).
 //! Each does exactly the IEEE operations the scalar code does (no fused
 //! multiply-add, the same NaN rules), so all compute bit-identical results.
 //!
@@ -193,6 +194,19 @@ mod x86 {
             is_x86_feature_detected!("avx2").then_some(Avx2(()))
         }
     }
+
+    impl Avx2 {
+        /// Sixteen lanes in pairs of 256-bit registers.
+        pub(in crate::bvh) fn x16(self) -> Avx2x16 {
+            Avx2x16(self)
+        }
+    }
+
+    /// Sixteen lanes as two halves of [`Avx2`] (made only from an [`Avx2`]
+    /// token): packets of sixteen rays where the CPU has no AVX-512. Each op
+    /// is its eight-lane op on each half; a mask's bits 8-15 are the high half's.
+    #[derive(Clone, Copy, Debug)]
+    pub(in crate::bvh) struct Avx2x16(Avx2);
 
     /// Proof that the CPU runs AVX-512 F and VL (made only by [`Avx512::detect`]):
     /// eight lanes in 256-bit registers, compares into mask registers.
@@ -534,6 +548,108 @@ mod x86 {
         #[inline(always)]
         fn greatest(self, x: __m512) -> f32 {
             unsafe { _mm512_reduce_max_ps(x) }
+        }
+    }
+
+    impl Lanes for Avx2x16 {
+        const N: usize = 16;
+        type F = [__m256; 2];
+        #[inline(always)]
+        fn splat(self, x: f32) -> [__m256; 2] {
+            let half = self.0.splat(x);
+            [half, half]
+        }
+        #[inline(always)]
+        fn load_at(self, row: &[f32; 16], offset: usize) -> [__m256; 2] {
+            assert!(offset == 0);
+            [self.0.load_at(row, 0), self.0.load_at(row, 8)]
+        }
+        #[inline(always)]
+        fn lanes_of(self, value: impl Fn(usize) -> f32) -> [__m256; 2] {
+            [
+                self.0.lanes_of(&value),
+                self.0.lanes_of(|lane| value(8 + lane)),
+            ]
+        }
+        #[inline(always)]
+        fn store_at(self, x: [__m256; 2], row: &mut [f32; 16], offset: usize) {
+            assert!(offset == 0);
+            self.0.store_at(x[0], row, 0);
+            self.0.store_at(x[1], row, 8);
+        }
+        #[inline(always)]
+        fn add(self, a: [__m256; 2], b: [__m256; 2]) -> [__m256; 2] {
+            [self.0.add(a[0], b[0]), self.0.add(a[1], b[1])]
+        }
+        #[inline(always)]
+        fn sub(self, a: [__m256; 2], b: [__m256; 2]) -> [__m256; 2] {
+            [self.0.sub(a[0], b[0]), self.0.sub(a[1], b[1])]
+        }
+        #[inline(always)]
+        fn mul(self, a: [__m256; 2], b: [__m256; 2]) -> [__m256; 2] {
+            [self.0.mul(a[0], b[0]), self.0.mul(a[1], b[1])]
+        }
+        #[inline(always)]
+        fn div(self, a: [__m256; 2], b: [__m256; 2]) -> [__m256; 2] {
+            [self.0.div(a[0], b[0]), self.0.div(a[1], b[1])]
+        }
+        #[inline(always)]
+        fn max_or_second(self, a: [__m256; 2], b: [__m256; 2]) -> [__m256; 2] {
+            [
+                self.0.max_or_second(a[0], b[0]),
+                self.0.max_or_second(a[1], b[1]),
+            ]
+        }
+        #[inline(always)]
+        fn min_or_second(self, a: [__m256; 2], b: [__m256; 2]) -> [__m256; 2] {
+            [
+                self.0.min_or_second(a[0], b[0]),
+                self.0.min_or_second(a[1], b[1]),
+            ]
+        }
+        #[inline(always)]
+        fn select(self, mask: u32, a: [__m256; 2], b: [__m256; 2]) -> [__m256; 2] {
+            [
+                self.0.select(mask & 0xff, a[0], b[0]),
+                self.0.select(mask >> 8, a[1], b[1]),
+            ]
+        }
+        #[inline(always)]
+        fn lt(self, a: [__m256; 2], b: [__m256; 2]) -> u32 {
+            self.0.lt(a[0], b[0]) | self.0.lt(a[1], b[1]) << 8
+        }
+        #[inline(always)]
+        fn le(self, a: [__m256; 2], b: [__m256; 2]) -> u32 {
+            self.0.le(a[0], b[0]) | self.0.le(a[1], b[1]) << 8
+        }
+        #[inline(always)]
+        fn gt(self, a: [__m256; 2], b: [__m256; 2]) -> u32 {
+            self.0.gt(a[0], b[0]) | self.0.gt(a[1], b[1]) << 8
+        }
+        #[inline(always)]
+        fn eq(self, a: [__m256; 2], b: [__m256; 2]) -> u32 {
+            self.0.eq(a[0], b[0]) | self.0.eq(a[1], b[1]) << 8
+        }
+        #[inline(always)]
+        fn edge_in_f64(
+            self,
+            px: [__m256; 2],
+            py: [__m256; 2],
+            qx: [__m256; 2],
+            qy: [__m256; 2],
+        ) -> [__m256; 2] {
+            [
+                self.0.edge_in_f64(px[0], py[0], qx[0], qy[0]),
+                self.0.edge_in_f64(px[1], py[1], qx[1], qy[1]),
+            ]
+        }
+        #[inline(always)]
+        fn least(self, x: [__m256; 2]) -> f32 {
+            self.0.least(self.0.min_or_second(x[0], x[1]))
+        }
+        #[inline(always)]
+        fn greatest(self, x: [__m256; 2]) -> f32 {
+            self.0.greatest(self.0.max_or_second(x[0], x[1]))
         }
     }
 }

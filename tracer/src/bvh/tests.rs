@@ -785,11 +785,23 @@ fn lanes_agree_bit_for_bit() {
         })
     };
     /// Every operation on rows `a` and `b`, `S::N` lanes at a time: results as
-    /// bits, and the compare masks.
-    fn ops<S: Lanes>(s: S, a: &[f32; 16], b: &[f32; 16]) -> (Vec<[u32; 16]>, Vec<u32>) {
-        let mut values = vec![[0u32; 16]; 10];
+    /// bits (a select by `choice`), the compare masks, and the least and the
+    /// greatest of `a` without NaNs and signed zeros (whose order no
+    /// reduction promises).
+    fn ops<S: Lanes>(
+        s: S,
+        a: &[f32; 16],
+        b: &[f32; 16],
+        choice: u32,
+    ) -> (Vec<[u32; 16]>, Vec<u32>, [f32; 2]) {
+        let mut values = vec![[0u32; 16]; 11];
         let mut masks = vec![0u32; 4];
+        let plain = a.map(|x| if x.is_nan() || x == 0.0 { 1.0 } else { x });
+        let mut extremes = [f32::INFINITY, f32::NEG_INFINITY];
         for offset in (0..16).step_by(S::N) {
+            let lanes = s.load_at(&plain, offset);
+            extremes[0] = extremes[0].min(s.least(lanes));
+            extremes[1] = extremes[1].max(s.greatest(lanes));
             let (x, y) = (s.load_at(a, offset), s.load_at(b, offset));
             let results = [
                 s.add(x, y),
@@ -803,6 +815,7 @@ fn lanes_agree_bit_for_bit() {
                 s.edge_in_f64(y, x, s.splat(a[5]), x),
                 // Lane `i` from scalars: the order of the lanes.
                 s.lanes_of(|lane| b[offset + lane] * 2.0),
+                s.select(choice >> offset, x, y),
             ];
             for (value, result) in values.iter_mut().zip(results) {
                 let mut out = [0.0; 16];
@@ -819,11 +832,12 @@ fn lanes_agree_bit_for_bit() {
                 *mask |= bits << offset;
             }
         }
-        (values, masks)
+        (values, masks, extremes)
     }
     for _ in 0..10000 {
         let (a, b) = (row(&mut random), row(&mut random));
-        let reference = ops(Portable, &a, &b);
+        let choice = random.next_u64() as u32 & 0xffff;
+        let reference = ops(Portable, &a, &b, choice);
         // The reference itself is the scalar code.
         for lane in 0..16 {
             let max = if a[lane] > b[lane] { a[lane] } else { b[lane] };
@@ -832,15 +846,22 @@ fn lanes_agree_bit_for_bit() {
             let (x, y) = (f64::from(a[lane]), f64::from(b[lane]));
             assert_eq!(reference.0[7][lane], ((x * x - y * y) as f32).to_bits());
             assert_eq!(reference.0[9][lane], (b[lane] * 2.0).to_bits());
+            let chosen = if choice >> lane & 1 == 1 {
+                a[lane]
+            } else {
+                b[lane]
+            };
+            assert_eq!(reference.0[10][lane], chosen.to_bits());
         }
         #[cfg(target_arch = "x86_64")]
         {
             if let Some(avx2) = super::simd::Avx2::detect() {
-                assert_eq!(ops(avx2, &a, &b), reference, "{a:?} {b:?}");
+                assert_eq!(ops(avx2, &a, &b, choice), reference, "{a:?} {b:?}");
+                assert_eq!(ops(avx2.x16(), &a, &b, choice), reference, "{a:?} {b:?}");
             }
             if let Some(avx512) = super::simd::Avx512::detect() {
-                assert_eq!(ops(avx512, &a, &b), reference, "{a:?} {b:?}");
-                assert_eq!(ops(avx512.x16(), &a, &b), reference, "{a:?} {b:?}");
+                assert_eq!(ops(avx512, &a, &b, choice), reference, "{a:?} {b:?}");
+                assert_eq!(ops(avx512.x16(), &a, &b, choice), reference, "{a:?} {b:?}");
             }
         }
     }

@@ -455,8 +455,15 @@ pub(super) fn occluded_batch(
 }
 
 /// A batch's traversal on the lanes an [`Isa`] gives: `S` tests boxes, `T`
-/// triangles.
+/// triangles (and holds a packet's rays, one per lane).
 trait BatchJob {
+    /// Whether the job's `T` is sixteen lanes on AVX2 too (two registers), not
+    /// eight. Closest-hit packets are a camera's rays from one origin, and
+    /// sixteen of them (as Embree's packets) share their nodes: WORKLOAD1's
+    /// `map<intersect>` takes 0.77-0.87 of the time it takes in packets of
+    /// eight. Any-hit packets, rays from several points, were as often slower
+    /// as faster in sixteen (docs/benchmarks.md).
+    const SIXTEEN_LANES_ON_AVX2: bool;
     fn run<S: Lanes8, T: Lanes>(self, boxes: S, triangles: T);
 }
 
@@ -488,8 +495,12 @@ unsafe fn run_avx512(lanes: super::simd::Avx512, job: impl BatchJob) {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn run_avx2(lanes: super::simd::Avx2, job: impl BatchJob) {
-    job.run(lanes, lanes)
+unsafe fn run_avx2<J: BatchJob>(lanes: super::simd::Avx2, job: J) {
+    if J::SIXTEEN_LANES_ON_AVX2 {
+        job.run(lanes, lanes.x16())
+    } else {
+        job.run(lanes, lanes)
+    }
 }
 
 /// Rays an any-hit batch sorts by [`packet_key`] at a time.
@@ -538,6 +549,8 @@ struct ClosestHits;
 struct AnyHits;
 
 impl<R: Fn(usize) -> Ray, K: FnMut(&[Found])> BatchJob for Batch<'_, R, K, ClosestHits> {
+    const SIXTEEN_LANES_ON_AVX2: bool = true;
+
     /// `T::N` rays at a time as a packet where they can ([`is_packet`]: the
     /// coherent rays of a camera), else one by one.
     #[inline(always)]
@@ -584,6 +597,8 @@ impl<R: Fn(usize) -> Ray, K: FnMut(&[Found])> BatchJob for Batch<'_, R, K, Close
 }
 
 impl<R: Fn(usize) -> Ray, K: FnMut(&[bool])> BatchJob for Batch<'_, R, K, AnyHits> {
+    const SIXTEEN_LANES_ON_AVX2: bool = false;
+
     #[inline(always)]
     fn run<S: Lanes8, T: Lanes>(self, boxes: S, triangles: T) {
         let (bvh, count, ray, mut sink) = self.into_parts();

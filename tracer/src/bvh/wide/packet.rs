@@ -35,7 +35,8 @@ use super::{
     WideNode, GROUP, LEAF, NO_HIT, ROBUST_FAR_SCALE, STACK_ENTRIES, WIDTH,
 };
 
-/// The widest packet (AVX-512: 16 rays).
+/// The widest packet (16 rays: AVX-512's, and AVX2's closest-hit packets in
+/// pairs of registers).
 pub(super) const MAX_PACKET: usize = 16;
 
 /// A subtree that at most a quarter of a packet's rays enter is finished by
