@@ -32,7 +32,6 @@ use std::mem::MaybeUninit;
 
 mod binned_sah;
 mod depth_limit;
-mod huge_pages;
 mod lbvh;
 mod simd;
 mod wide;
@@ -240,7 +239,7 @@ impl Bvh {
     /// eight-wide tree.
     fn from_binary(binary: BinaryTree, mesh: &TriangleMesh) -> Bvh {
         let triangles =
-            huge_pages::collect_on_huge_pages(binary.triangle_ids.par_iter().map(|&id| {
+            crate::huge_pages::collect_on_huge_pages(binary.triangle_ids.par_iter().map(|&id| {
                 let [v0, v1, v2] = mesh.triangle_vertices(id as usize).map(|v| v.to_array());
                 BvhTriangle { v0, v1, v2 }
             }));

@@ -6,6 +6,7 @@ pub mod bvh;
 pub mod cache;
 pub mod camera;
 pub mod functors;
+mod huge_pages;
 pub mod marching_cubes_tables;
 pub mod mesh;
 pub mod mesh_write;

@@ -12,11 +12,11 @@
 //! boxes are exact in any order, counts are integers, and each node's costs are
 //! summed on one thread.
 
-use super::huge_pages::{collect_on_huge_pages, vec_on_huge_pages};
 use super::{
     binary_child, root_first, splice, BinaryTree, BvhNode, Flattened, COLLAPSE_TRAVERSAL_COST,
     MAX_LEAF_TRIANGLES, MAX_STACK_DEPTH,
 };
+use crate::huge_pages::{collect_on_huge_pages, vec_on_huge_pages};
 use crate::mesh::TriangleMesh;
 use glam::{BVec3A, BVec4A, Vec3A, Vec4};
 use obvhs::aabb::Aabb;

@@ -35,8 +35,8 @@
 //! no order of joining changes. The tree is the same on any number of threads.
 
 use super::depth_limit::triangle_box;
-use super::huge_pages::collect_on_huge_pages;
 use super::{binary_child, collapses_into_one_leaf, root_first, BinaryTree, BvhNode, Flattened};
+use crate::huge_pages::collect_on_huge_pages;
 use crate::mesh::TriangleMesh;
 use obvhs::aabb::Aabb;
 use obvhs::ploc::morton::morton_encode_u64;

@@ -16,9 +16,9 @@
 //! shared edge or vertex, or overlapping copies of a surface, as CAD meshes have)
 //! every traversal keeps the one with the lowest leaf-order index.
 
-use super::huge_pages::{collect_on_huge_pages, vec_on_huge_pages};
 use super::simd::{Lanes, Lanes8, LanesExt, Portable};
 use super::{Bvh, BvhChild, BvhNode, BvhTriangle, PreparedRay, Ray, ROBUST_FAR_SCALE};
+use crate::huge_pages::{collect_on_huge_pages, vec_on_huge_pages};
 use packet::{is_packet, packet_key, single_rays_below, trace_packet, PacketStack, MAX_PACKET};
 
 use rayon::prelude::*;

@@ -1,10 +1,11 @@
 //! From the isosurface pipeline's `Triangle` output to a [`TriangleMesh`]
 //! (written to files by [`crate::mesh_write`]).
 
+use super::weld::{quantise, weld_corners};
 use crate::mesh::TriangleMesh;
 use dpp_runtime::{Column, ColumnView, ElemType};
 use glam::Vec3;
-use std::collections::HashMap;
+use rayon::prelude::*;
 use thiserror::Error;
 
 /// The column given to [`triangles_to_mesh`] is not an array of `Triangle` records.
@@ -126,40 +127,55 @@ pub fn welded_mesh(
     let view = triangles.view();
     let columns = TriangleColumns::new(&view)?;
     let n = subset.map_or(columns.len(), <[u32]>::len);
-    let mut mesh = TriangleMesh {
-        positions: Vec::with_capacity(n / 2 + 3),
-        triangles: Vec::with_capacity(n),
-        normals: Some(Vec::new()),
-        scalars: Some(Vec::new()),
-    };
-    let normals = mesh.normals.as_mut().unwrap();
-    let scalars = mesh.scalars.as_mut().unwrap();
     let diagonal = if min.cmple(max).all() {
         (max - min).length() as f64
     } else {
         0.0
     };
     let quantum = (diagonal / f64::from(1u32 << 20)).max(f64::MIN_POSITIVE);
-    let key = |p: Vec3| p.to_array().map(|c| (c as f64 / quantum).round() as i64);
-    let mut index: HashMap<[i64; 3], u32> = HashMap::with_capacity(n);
-    let mut kept = Vec::with_capacity(n);
-    for position in 0..n {
+    // Corner `3 position + i` is corner `i` of the `position`th triangle.
+    let corner = |corner: usize| {
+        let position = corner / 3;
         let t = subset.map_or(position, |subset| subset[position] as usize);
-        let corners: [u32; 3] = std::array::from_fn(|i| {
-            let p = columns.corners[i][t];
-            *index.entry(key(p)).or_insert_with(|| {
-                mesh.positions.push(p);
-                normals.push(columns.normals[i][t]);
-                scalars.push(columns.scalars[i][t]);
-                mesh.positions.len() as u32 - 1
-            })
-        });
-        let [a, b, c] = corners;
-        if a != b && b != c && c != a {
-            mesh.triangles.push(corners);
-            kept.push(position as u32);
-        }
-    }
+        (corner % 3, t)
+    };
+    let welding = weld_corners(3 * n, quantise(min, quantum), |c| {
+        let (i, t) = corner(c);
+        quantise(columns.corners[i][t], quantum)
+    });
+    let positions = welding.per_vertex(|c| {
+        let (i, t) = corner(c);
+        columns.corners[i][t]
+    });
+    let normals = welding.per_vertex(|c| {
+        let (i, t) = corner(c);
+        columns.normals[i][t]
+    });
+    let scalars = welding.per_vertex(|c| {
+        let (i, t) = corner(c);
+        columns.scalars[i][t]
+    });
+    // A triangle two of whose corners became one vertex is dropped.
+    let vertices = |position: usize| -> [u32; 3] {
+        std::array::from_fn(|i| welding.corner_vertex[3 * position + i])
+    };
+    let kept: Vec<u32> = (0..n as u32)
+        .into_par_iter()
+        .filter(|&position| {
+            let [a, b, c] = vertices(position as usize);
+            a != b && b != c && c != a
+        })
+        .collect();
+    let triangles = kept
+        .par_iter()
+        .map(|&position| vertices(position as usize))
+        .collect();
+    let mesh = TriangleMesh {
+        positions,
+        triangles,
+        normals: Some(normals),
+        scalars: Some(scalars),
+    };
     Ok((mesh, kept))
 }
 

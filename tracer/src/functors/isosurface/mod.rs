@@ -12,7 +12,8 @@
 //! - the per-cell geometry the functors `cubeCase`, `caseTriangles` and
 //!   `cubeTriangle` compute (see their modules);
 //! - [`mesh`]: turning the `Triangle` output into a [`crate::TriangleMesh`]
-//!   (welded or not), which [`crate::mesh_write`] writes as OBJ or PLY.
+//!   (welded or not), which [`crate::mesh_write`] writes as OBJ or PLY;
+//!   `weld.rs` finds which corners are one vertex, by a sort.
 //!
 //! # Conventions
 //!
@@ -35,6 +36,7 @@
 //! vertices are bit-identical and the surface is watertight.
 
 pub mod mesh;
+mod weld;
 
 pub use mesh::{corner_bounds, triangles_to_mesh, welded_mesh, NotTriangles, TriangleColumns};
 

@@ -1,8 +1,9 @@
 //! Large build arrays on 2 MiB pages where the kernel offers them.
 //!
-//! A build writes about 120 bytes a triangle into fresh memory (references
-//! and their scratch copy, the triangles in leaf order, the wide tree), and
-//! the first write to each 4 KiB page of fresh memory faults. On this
+//! A BVH build writes about 120 bytes a triangle into fresh memory
+//! (references and their scratch copy, the triangles in leaf order, the wide
+//! tree), an isosurface's welding about 40 a corner, and the first write to
+//! each 4 KiB page of fresh memory faults. On this
 //! project's 2-core VM a fault cost about 4 µs, so a cold build of the
 //! dragon spent about a third of its time faulting (docs/benchmarks.md).
 //! Linux backs a range it was advised `MADV_HUGEPAGE` for with 2 MiB pages
@@ -11,7 +12,7 @@
 
 /// An empty vector with room for `capacity` elements, its memory advised for
 /// huge pages before anything writes it (only when it spans one at least).
-pub(super) fn vec_on_huge_pages<T>(capacity: usize) -> Vec<T> {
+pub(crate) fn vec_on_huge_pages<T>(capacity: usize) -> Vec<T> {
     let vector: Vec<T> = Vec::with_capacity(capacity);
     #[cfg(target_os = "linux")]
     advise_huge_pages(
@@ -23,7 +24,7 @@ pub(super) fn vec_on_huge_pages<T>(capacity: usize) -> Vec<T> {
 
 /// The items of a parallel iterator collected, in order, into a vector on huge
 /// pages ([`vec_on_huge_pages`]).
-pub(super) fn collect_on_huge_pages<T: Send>(
+pub(crate) fn collect_on_huge_pages<T: Send>(
     items: impl rayon::iter::IndexedParallelIterator<Item = T>,
 ) -> Vec<T> {
     let mut vector = vec_on_huge_pages(items.len());
