@@ -96,20 +96,25 @@ pub fn corner_bounds(
 ) -> Result<(Vec3, Vec3), NotTriangles> {
     let view = triangles.view();
     let columns = TriangleColumns::new(&view)?;
-    let (mut min, mut max) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-    let mut visit = |t: usize| {
-        for corner in &columns.corners {
-            let p = corner[t];
-            if p.is_finite() {
-                min = min.min(p);
-                max = max.max(p);
-            }
-        }
+    let n = subset.map_or(columns.len(), <[u32]>::len);
+    let empty = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    let join = |(low, high): (Vec3, Vec3), (other_low, other_high): (Vec3, Vec3)| {
+        (low.min(other_low), high.max(other_high))
     };
-    match subset {
-        Some(subset) => subset.iter().for_each(|&t| visit(t as usize)),
-        None => (0..columns.len()).for_each(&mut visit),
-    }
+    let (min, max) = (0..n)
+        .into_par_iter()
+        .map(|position| {
+            let t = subset.map_or(position, |subset| subset[position] as usize);
+            columns
+                .corners
+                .iter()
+                // `-0` as `+0`: which of two equal zeros `min` keeps would
+                // otherwise depend on the order of the joins.
+                .map(|corner| corner[t] + Vec3::ZERO)
+                .filter(|p| p.is_finite())
+                .fold(empty, |bounds, p| join(bounds, (p, p)))
+        })
+        .reduce(|| empty, join);
     Ok((min, max))
 }
 
