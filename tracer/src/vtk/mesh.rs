@@ -24,6 +24,7 @@
 use super::{inline_pieces, parse, Association, Field, FieldChoice, VtkError, VtkKind};
 use crate::mesh::TriangleMesh;
 use glam::Vec3;
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::Path;
 use vtkio::model::{CellType, DataSet, IOBuffer, VertexNumbers};
@@ -197,7 +198,7 @@ impl Builder {
             }
             shapes.push(shape);
         }
-        // How many 3-D cells use each face, by its sorted point ids.
+        // Each 3-D cell's faces by their sorted point ids, in cell order.
         let key = |corners: &[u32], face: &[usize]| {
             let mut key = [u32::MAX; 4];
             for (k, &f) in key.iter_mut().zip(face) {
@@ -206,12 +207,13 @@ impl Builder {
             key.sort_unstable();
             key
         };
-        let mut uses: HashMap<[u32; 4], u32> = HashMap::new();
-        for (corners, shape) in list.iter().zip(&shapes) {
-            for face in shape.faces() {
-                *uses.entry(key(corners, face)).or_default() += 1;
-            }
+        let keys: Vec<[u32; 4]> = (list.iter().zip(&shapes))
+            .flat_map(|(corners, shape)| shape.faces().iter().map(move |face| key(corners, face)))
+            .collect();
+        if u32::try_from(keys.len()).is_err() {
+            return Err(VtkError::new(path, "more than 2³² faces of 3-D cells"));
         }
+        let mut external = faces_of_one_cell(&keys).into_iter();
         let mut face = Vec::with_capacity(4);
         for (cell, (corners, shape)) in list.iter().zip(&shapes).enumerate() {
             match shape {
@@ -223,7 +225,7 @@ impl Builder {
                 ),
                 Shape::Solid(_) => {
                     for local in shape.faces() {
-                        if uses[&key(corners, local)] == 1 {
+                        if external.next() == Some(true) {
                             face.clear();
                             face.extend(local.iter().map(|&f| corners[f]));
                             self.face(&face, false, cell);
@@ -400,6 +402,42 @@ impl Shape {
     }
 }
 
+/// For each face (its sorted point ids), whether no other face has the same
+/// ids. By a sort of the faces' ids rather than a hash map of them: on a
+/// million hexahedra the map's lookups were two thirds of reading the file
+/// (docs/benchmarks.md).
+fn faces_of_one_cell(keys: &[[u32; 4]]) -> Vec<bool> {
+    #[derive(Clone, Copy)]
+    struct Face {
+        key: [u32; 4],
+        index: u32,
+    }
+    impl rdst::RadixKey for Face {
+        const LEVELS: usize = 16;
+
+        #[inline]
+        fn get_level(&self, level: usize) -> u8 {
+            (self.key[level / 4] >> (level % 4 * 8)) as u8
+        }
+    }
+    let mut faces: Vec<Face> = keys
+        .par_iter()
+        .enumerate()
+        .map(|(index, &key)| Face {
+            key,
+            index: index as u32,
+        })
+        .collect();
+    rdst::RadixSort::radix_sort_unstable(&mut faces);
+    let mut alone = vec![false; keys.len()];
+    for run in faces.chunk_by(|a, b| a.key == b.key) {
+        if let [face] = run {
+            alone[face.index as usize] = true;
+        }
+    }
+    alone
+}
+
 /// Cells as point-id lists: cell `c` is `ids[starts[c]..starts[c + 1]]`,
 /// every id checked against the piece's point count.
 struct CellList {
@@ -491,6 +529,30 @@ fn cell_list(path: &Path, numbers: &VertexNumbers, points: usize) -> Result<Cell
 mod tests {
     use super::*;
     use crate::vtk::{fixture, read_mutated_fixtures};
+
+    #[test]
+    fn faces_of_one_cell_are_those_whose_ids_no_other_face_has() {
+        let mut random = dpp_runtime::random::SplitMix64::new(3);
+        // Few distinct ids, so that many faces repeat (twice, or more).
+        let keys: Vec<[u32; 4]> = (0..20_000)
+            .map(|_| {
+                let mut key = [0, 0, 0, u32::MAX].map(|_| random.below(12) as u32);
+                if random.chance(2) {
+                    key[3] = u32::MAX;
+                }
+                key.sort_unstable();
+                key
+            })
+            .collect();
+        let mut uses: HashMap<[u32; 4], u32> = HashMap::new();
+        for key in &keys {
+            *uses.entry(*key).or_default() += 1;
+        }
+        let expected: Vec<bool> = keys.iter().map(|key| uses[key] == 1).collect();
+        assert!(expected.contains(&true) && expected.contains(&false));
+        assert_eq!(faces_of_one_cell(&keys), expected);
+        assert_eq!(faces_of_one_cell(&[]), Vec::<bool>::new());
+    }
 
     fn read(name: &str, field: &str) -> Result<TriangleMesh, VtkError> {
         let choice = match field {
