@@ -5,6 +5,7 @@ pub mod builtin_scene;
 pub mod bvh;
 pub mod cache;
 pub mod camera;
+mod equal_keys;
 pub mod functors;
 mod huge_pages;
 pub mod marching_cubes_tables;

@@ -22,11 +22,13 @@
 //! only that piece sees it.
 
 use super::{inline_pieces, parse, Association, Field, FieldChoice, VtkError, VtkKind};
+use crate::equal_keys::{for_each_run_of_equal_keys, Keyed};
 use crate::mesh::TriangleMesh;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 use vtkio::model::{CellType, DataSet, IOBuffer, VertexNumbers};
 
 /// The meshes of `path`: one for a serial file (its pieces joined), one per
@@ -407,35 +409,23 @@ impl Shape {
 /// million hexahedra the map's lookups were most of reading the file
 /// (docs/benchmarks.md, "External faces by a sort").
 fn faces_of_one_cell(keys: &[[u32; 4]]) -> Vec<bool> {
-    #[derive(Clone, Copy)]
-    struct Face {
-        key: [u32; 4],
-        index: u32,
-    }
-    impl rdst::RadixKey for Face {
-        const LEVELS: usize = 16;
-
-        #[inline]
-        fn get_level(&self, level: usize) -> u8 {
-            (self.key[level / 4] >> (level % 4 * 8)) as u8
-        }
-    }
-    let mut faces: Vec<Face> = keys
+    let faces = keys
         .par_iter()
         .enumerate()
-        .map(|(index, &key)| Face {
-            key,
+        .map(|(index, key)| Keyed {
+            key: key
+                .iter()
+                .fold(0u128, |packed, &id| packed << 32 | u128::from(id)),
             index: index as u32,
         })
         .collect();
-    rdst::RadixSort::radix_sort_unstable(&mut faces);
-    let mut alone = vec![false; keys.len()];
-    for run in faces.chunk_by(|a, b| a.key == b.key) {
+    let alone: Vec<AtomicBool> = keys.par_iter().map(|_| AtomicBool::new(false)).collect();
+    for_each_run_of_equal_keys(faces, |run| {
         if let [face] = run {
-            alone[face.index as usize] = true;
+            alone[face.index as usize].store(true, Ordering::Relaxed);
         }
-    }
-    alone
+    });
+    alone.into_par_iter().map(AtomicBool::into_inner).collect()
 }
 
 /// Cells as point-id lists: cell `c` is `ids[starts[c]..starts[c + 1]]`,

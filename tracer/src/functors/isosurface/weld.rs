@@ -3,7 +3,7 @@
 //! (corner `3 t + i` is corner `i` of triangle `t`), so the vertices come in
 //! the order a walk of the corners first meets them.
 //!
-//! By a sort, as data-parallel libraries find duplicate vertices: each
+//! By a sort (`crate::equal_keys`), as data-parallel libraries find duplicate vertices: each
 //! corner's key (the three quantised coordinates, packed into 63 bits) is
 //! sorted with its corner, every run of equal keys is one vertex, and its
 //! smallest corner says where that vertex goes. On every core, the same
@@ -15,6 +15,7 @@
 //! 2²¹ quanta or more from the origin given) are welded by that walk, which
 //! gives the same numbering.
 
+use crate::equal_keys::{for_each_run_of_equal_keys, Keyed};
 use crate::huge_pages::collect_on_huge_pages;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -75,29 +76,13 @@ pub(super) fn weld_corners(
     }
 }
 
-/// A corner and its packed key; sorted by the key alone.
-#[derive(Clone, Copy)]
-struct Entry {
-    key: u64,
-    corner: u32,
-}
-
-impl rdst::RadixKey for Entry {
-    const LEVELS: usize = 8;
-
-    #[inline]
-    fn get_level(&self, level: usize) -> u8 {
-        (self.key >> (level * 8)) as u8
-    }
-}
-
 /// Every corner's key as offsets from `origin`, packed, if every offset is
 /// below 2²¹ and the corners can be numbered in a `u32`.
 fn packed_keys(
     corner_count: usize,
     origin: [i64; 3],
     key: &(impl Fn(usize) -> [i64; 3] + Sync),
-) -> Option<Vec<Entry>> {
+) -> Option<Vec<Keyed<u64>>> {
     u32::try_from(corner_count).ok()?;
     let unpacked = AtomicBool::new(false);
     let entries = collect_on_huge_pages((0..corner_count).into_par_iter().map(|corner| {
@@ -112,28 +97,26 @@ fn packed_keys(
         let packed = offsets.iter().fold(0u64, |packed, &offset| {
             packed << AXIS_BITS | (offset as u64 & ((1 << AXIS_BITS) - 1))
         });
-        Entry {
+        Keyed {
             key: packed,
-            corner: corner as u32,
+            index: corner as u32,
         }
     }));
     (!unpacked.into_inner()).then_some(entries)
 }
 
-fn weld_by_sorting(mut entries: Vec<Entry>) -> Welding {
-    rdst::RadixSort::radix_sort_unstable(&mut entries);
+fn weld_by_sorting(entries: Vec<Keyed<u64>>) -> Welding {
     let corner_count = entries.len();
     // Each corner's representative: the smallest corner of its run.
     let zeros =
         || collect_on_huge_pages((0..corner_count).into_par_iter().map(|_| AtomicU32::new(0)));
     let representative = zeros();
-    entries.par_chunk_by(|a, b| a.key == b.key).for_each(|run| {
-        let first = run.iter().map(|entry| entry.corner).min().unwrap_or(0);
+    for_each_run_of_equal_keys(entries, |run| {
+        let first = run.iter().map(|entry| entry.index).min().unwrap_or(0);
         for entry in run {
-            representative[entry.corner as usize].store(first, Ordering::Relaxed);
+            representative[entry.index as usize].store(first, Ordering::Relaxed);
         }
     });
-    drop(entries);
     let first_of = |corner: usize| representative[corner].load(Ordering::Relaxed);
     // The representatives in corner order are the vertices in order.
     let vertex_corner: Vec<u32> = (0..corner_count as u32)
