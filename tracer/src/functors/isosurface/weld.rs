@@ -3,9 +3,9 @@
 //! (corner `3 t + i` is corner `i` of triangle `t`), so the vertices come in
 //! the order a walk of the corners first meets them.
 //!
-//! By a sort (`crate::equal_keys`), as data-parallel libraries find duplicate vertices: each
-//! corner's key (the three quantised coordinates, packed into 63 bits) is
-//! sorted with its corner, every run of equal keys is one vertex, and its
+//! By a sort (`crate::equal_keys`), as data-parallel libraries find
+//! duplicate vertices: each corner's key (the three quantised coordinates,
+//! packed into 63 bits) is sorted with its corner, every run of equal keys is one vertex, and its
 //! smallest corner says where that vertex goes. On every core, the same
 //! numbering on any number of threads (a run's smallest corner does not depend
 //! on the order the sort leaves within it). A first walk of the corners with a
