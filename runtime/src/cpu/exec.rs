@@ -440,23 +440,35 @@ impl StageRun<'_, '_> {
                 ..
             } => {
                 let mut dst = self.scatter_target(op, values, Contents::Zeroed)?;
-                for result in results {
-                    let SinkPart::Scatter {
-                        indices,
-                        values,
-                        mask,
-                    } = &result.sinks[number]
-                    else {
-                        unreachable!()
-                    };
-                    let range = result.range.clone();
-                    let indices = indices.view(&range);
-                    let values = values.view(&range);
-                    let mask = mask.as_ref().map(|m| m.view(&range));
-                    let mask = mask.as_ref().map(|m| m.as_bool());
-                    kernels::scatter_combine(*combine, indices.as_u32(), &values, mask, &mut dst)
-                        .map_err(RunError::from)?;
-                }
+                let parts: Vec<_> = results
+                    .iter()
+                    .map(|result| {
+                        let SinkPart::Scatter {
+                            indices,
+                            values,
+                            mask,
+                        } = &result.sinks[number]
+                        else {
+                            unreachable!()
+                        };
+                        let range = result.range.clone();
+                        (
+                            indices.view(&range),
+                            values.view(&range),
+                            mask.as_ref().map(|m| m.view(&range)),
+                        )
+                    })
+                    .collect();
+                let parts: Vec<_> = parts
+                    .iter()
+                    .map(|(indices, src, mask)| kernels::ScatterPart {
+                        indices: indices.as_u32(),
+                        src: src.clone(),
+                        mask: mask.as_ref().map(|m| m.as_bool()),
+                    })
+                    .collect();
+                kernels::scatter_combine_parts(*combine, &parts, &mut dst)
+                    .map_err(RunError::from)?;
                 self.store(op.outputs[0], dst);
             }
             OpKind::Reduce { op: monoid } => {

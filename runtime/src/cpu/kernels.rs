@@ -74,19 +74,12 @@ pub(crate) fn check_scatter(
     check_indices(indices, mask, dst_len)
 }
 
-/// `dst[indices[i]] = write(dst[indices[i]], src[i])` for increasing `i` where
-/// `mask[i]`; the indices are already checked.
-fn scatter_typed<T: Copy>(
-    indices: &[u32],
-    src: &[T],
-    mask: Option<&[bool]>,
-    dst: &mut [T],
-    write: impl Fn(T, T) -> T,
-) {
+/// `dst[indices[i]] = src[i]` for increasing `i` where `mask[i]`; the
+/// indices are already checked.
+fn scatter_typed<T: Copy>(indices: &[u32], src: &[T], mask: Option<&[bool]>, dst: &mut [T]) {
     for (position, (&index, &value)) in indices.iter().zip(src).enumerate() {
         if mask.is_none_or(|mask| mask[position]) {
-            let slot = &mut dst[index as usize];
-            *slot = write(*slot, value);
+            dst[index as usize] = value;
         }
     }
 }
@@ -122,7 +115,7 @@ fn scatter_checked(
     }
     with_element_type!(dst.elem_type(), primitive, T => {
         let src = typed_slice::<T>(src)?;
-        scatter_typed(indices, src, mask, typed_vec::<T>(dst)?, |_, new| new);
+        scatter_typed(indices, src, mask, typed_vec::<T>(dst)?);
         Ok(())
     }, record => Err(KernelError::TypeMismatch { expected: record, found: src.elem_type() }))
 }
@@ -137,13 +130,97 @@ pub fn scatter_combine(
     mask: Option<&[bool]>,
     dst: &mut Column,
 ) -> Result<(), KernelError> {
-    check_scatter(indices, src, mask, dst.elem_type(), dst.len())?;
-    with_element_type!(dst.elem_type(), primitive, T => {
+    let part = ScatterPart {
+        indices,
+        src: src.clone(),
+        mask,
+    };
+    scatter_combine_parts(op, std::slice::from_ref(&part), dst)
+}
+
+/// One part of a combining scatter: a stage's chunk of indices, values and mask.
+#[derive(Clone)]
+pub struct ScatterPart<'a> {
+    pub indices: &'a [u32],
+    pub src: ColumnView<'a>,
+    pub mask: Option<&'a [bool]>,
+}
+
+/// Below this many slots a combining scatter runs on one thread.
+const SLOTS_PER_SCATTER_TASK: usize = 1 << 16;
+
+/// [`scatter_combine`] of `parts` one after another, as one pass over their
+/// concatenation. It runs in parallel over ranges of `dst`: each task combines
+/// the values whose slots are in its range, part after part, so each slot
+/// sees its values in the same order as in one pass, and the bits do not
+/// depend on the number of tasks. A task skips the parts whose indices all
+/// lie outside its range: a stage's chunks of rays in Morton order each
+/// write a few rows of the image. (One pass on one thread left the other
+/// idle for 26 ms of a 920 ms WORKLOAD3 frame, adding 8.3M colours.) Every
+/// part's indices are checked before anything is written.
+pub fn scatter_combine_parts(
+    op: MonoidOp,
+    parts: &[ScatterPart<'_>],
+    dst: &mut Column,
+) -> Result<(), KernelError> {
+    let (dst_type, dst_len) = (dst.elem_type(), dst.len());
+    // Each part's least and greatest index used (none where all are masked off).
+    let bounds = parts
+        .par_iter()
+        .map(|part| {
+            check_scatter(part.indices, &part.src, part.mask, dst_type, dst_len)?;
+            Ok(used_index_bounds(part.indices, part.mask))
+        })
+        .collect::<Result<Vec<_>, KernelError>>()?;
+    with_element_type!(dst_type, primitive, T => {
         let monoid = Monoid::<T>::new(op)?;
-        let (src, dst) = (typed_slice::<T>(src)?, typed_vec::<T>(dst)?);
-        scatter_typed(indices, src, mask, dst, |old, new| monoid.combine(old, new));
+        let sources = parts
+            .iter()
+            .map(|part| typed_slice::<T>(&part.src))
+            .collect::<Result<Vec<_>, _>>()?;
+        let dst = typed_vec::<T>(dst)?;
+        // Several ranges per thread, as the parts crowd unevenly.
+        let tasks = (4 * rayon::current_num_threads())
+            .min(dst_len / SLOTS_PER_SCATTER_TASK)
+            .max(1);
+        let slots_per_task = dst_len.div_ceil(tasks).max(1);
+        dst.par_chunks_mut(slots_per_task)
+            .with_max_len(1)
+            .enumerate()
+            .for_each(|(task, slots)| {
+                let first = task * slots_per_task;
+                let last = first + slots.len() - 1;
+                for ((part, src), bounds) in parts.iter().zip(&sources).zip(&bounds) {
+                    if !bounds.is_some_and(|(least, most)| least <= last && most >= first) {
+                        continue;
+                    }
+                    for (position, &index) in part.indices.iter().enumerate() {
+                        // Wrapping: a slot below `first` falls far outside.
+                        let slot = (index as usize).wrapping_sub(first);
+                        if slot < slots.len() && part.mask.is_none_or(|mask| mask[position]) {
+                            slots[slot] = monoid.combine(slots[slot], src[position]);
+                        }
+                    }
+                }
+            });
         Ok(())
     }, record => Err(unsupported(op, record)))
+}
+
+/// The least and greatest of the indices that `mask` keeps (all without one).
+fn used_index_bounds(indices: &[u32], mask: Option<&[bool]>) -> Option<(usize, usize)> {
+    indices
+        .iter()
+        .enumerate()
+        .filter(|&(position, _)| mask.is_none_or(|mask| mask[position]))
+        .fold(None, |bounds, (_, &index)| {
+            let index = index as usize;
+            Some(
+                bounds.map_or((index, index), |(least, most): (usize, usize)| {
+                    (least.min(index), most.max(index))
+                }),
+            )
+        })
 }
 
 /// Runs `work` over `0..len` cut into consecutive ranges of `chunk` elements

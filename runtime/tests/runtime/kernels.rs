@@ -2,7 +2,8 @@
 //! (small) test chunk size so that the multi-chunk paths run.
 
 use dpp_runtime::cpu::kernels::{
-    gather, reduce, run_chunked, scan, scatter, scatter_combine, DEFAULT_CHUNK,
+    gather, reduce, run_chunked, scan, scatter, scatter_combine, scatter_combine_parts,
+    ScatterPart, DEFAULT_CHUNK,
 };
 use dpp_runtime::elem::{Element, KernelError, PrimitiveElement};
 use dpp_runtime::monoid::{combine_columns, identity, monoid_supports, reduce_groups};
@@ -452,6 +453,78 @@ fn gather_and_scatter_records() {
         dst,
         records(&[2, 0, 0, 1], &[Vec3::Y, Vec3::ZERO, Vec3::ZERO, Vec3::X])
     );
+}
+
+/// A stage's combining scatter: its chunks' parts in turn, on any number of
+/// threads, give the sequential kernel's bits, float sums into a slot from
+/// several parts included (their order changes the sum), over a target large
+/// enough to be cut into several ranges.
+#[test]
+fn combining_scatter_of_parts_is_sequential_on_any_thread_count() {
+    let dst_len = 300_007;
+    let initial: Vec<f32> = (0..dst_len).map(|slot| (slot % 7) as f32 * 0.1).collect();
+    // Part `p` writes a run of slots from its own start, with a stride that
+    // crosses the others' runs, and values of very different magnitudes.
+    let parts: Vec<(Vec<u32>, Vec<f32>, Option<Vec<bool>>)> = (0..23u32)
+        .map(|p| {
+            let len = 9_000 + 1_000 * p as usize;
+            let indices = (0..len as u32)
+                .map(|i| (p * 13_001 + i * (1 + p % 5)) % dst_len as u32)
+                .collect();
+            let values = (0..len)
+                .map(|i| if i % 3 == 0 { 1.0e7 } else { 0.3 + p as f32 } * if p % 2 == 0 { 1.0 } else { -1.0 })
+                .collect();
+            let mask = (p % 4 == 1).then(|| (0..len).map(|i| i % 5 != 0).collect());
+            (indices, values, mask)
+        })
+        .collect();
+    let mut expected = Column::F32(initial.clone());
+    for (indices, values, mask) in &parts {
+        let values = Column::F32(values.clone());
+        scatter_combine(
+            MonoidOp::Add,
+            indices,
+            &values.view(),
+            mask.as_deref(),
+            &mut expected,
+        )
+        .unwrap();
+    }
+    let columns: Vec<Column> = parts
+        .iter()
+        .map(|(_, values, _)| Column::F32(values.clone()))
+        .collect();
+    let scatter_parts: Vec<ScatterPart<'_>> = parts
+        .iter()
+        .zip(&columns)
+        .map(|((indices, _, mask), values)| ScatterPart {
+            indices,
+            src: values.view(),
+            mask: mask.as_deref(),
+        })
+        .collect();
+    for threads in [1, 2, 3, 8] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let mut result = Column::F32(initial.clone());
+        pool.install(|| scatter_combine_parts(MonoidOp::Add, &scatter_parts, &mut result))
+            .unwrap();
+        assert_eq!(result, expected, "{threads} threads");
+    }
+    // A bad index in the last part: nothing is written.
+    let bad = [0, dst_len as u32];
+    let bad_values = Column::F32(vec![1.0, 2.0]);
+    let mut with_bad = scatter_parts.clone();
+    with_bad.push(ScatterPart {
+        indices: &bad,
+        src: bad_values.view(),
+        mask: None,
+    });
+    let mut result = Column::F32(initial.clone());
+    assert!(scatter_combine_parts(MonoidOp::Add, &with_bad, &mut result).is_err());
+    assert_eq!(result, Column::F32(initial));
 }
 
 #[test]
