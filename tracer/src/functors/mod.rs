@@ -65,6 +65,7 @@ use dpp_runtime::{
 };
 use glam::Vec3;
 use std::mem::MaybeUninit;
+use std::ops::Range;
 use std::sync::Arc;
 use wgsl::TwinParts;
 
@@ -301,6 +302,109 @@ impl<'a> RayWriter<'a> {
             commit(self.weight, len);
             commit(self.depth, len);
         }
+    }
+}
+
+impl RayWriter<'_> {
+    /// Appends `lanes` dead rays ([`RayRecord::dead`]) for each of a run of
+    /// misses, whose samples and depths these are, a column at a time: fills
+    /// and copies, not six interleaved streams of scalar stores. (Most
+    /// surfaces of a view with much background are misses, and their
+    /// occlusion rays were most of `occRayGen`'s time.)
+    pub fn extend_dead(
+        &mut self,
+        samples: &[u32],
+        depths: impl ExactSizeIterator<Item = u32>,
+        lanes: usize,
+    ) {
+        let dead = RayRecord::dead(0, 0);
+        let len = samples.len() * lanes;
+        extend_with_copies_of_vec3(self.origin, len, dead.origin);
+        extend_with_copies_of_vec3(self.dir, len, dead.dir);
+        self.tmax.resize(self.tmax.len() + len, dead.tmax);
+        extend_with_copies_of_vec3(self.weight, len, dead.weight);
+        extend_with_each_repeated(self.sample, samples.iter().copied(), lanes);
+        extend_with_each_repeated(self.depth, depths, lanes);
+    }
+}
+
+/// `0..len` cut into maximal runs of consecutive indices with the same
+/// `key`, in order, each with its key: a functor makes a run of misses'
+/// dead rays at once ([`RayWriter::extend_dead`]).
+pub(crate) fn runs_of(
+    len: usize,
+    key: impl Fn(usize) -> bool,
+) -> impl Iterator<Item = (bool, Range<usize>)> {
+    let mut start = 0;
+    std::iter::from_fn(move || {
+        if start == len {
+            return None;
+        }
+        let run_key = key(start);
+        let end = (start + 1..len)
+            .find(|&next| key(next) != run_key)
+            .unwrap_or(len);
+        let run = start..end;
+        start = end;
+        Some((run_key, run))
+    })
+}
+
+/// Appends `len` copies of `value` to `column`: zeros by `memset`, then eight
+/// copies at a time as one 96-byte copy (a loop of 12-byte stores does not
+/// vectorise).
+fn extend_with_copies_of_vec3(column: &mut Vec<Vec3>, len: usize, value: Vec3) {
+    let start = column.len();
+    let written = spare(column, len);
+    // SAFETY: all-zero bytes are a valid `Vec3` (three 0.0 floats), so the
+    // `len` spare elements are initialised and may be appended.
+    unsafe {
+        std::ptr::write_bytes(written.as_mut_ptr(), 0, len);
+        commit(column, len);
+    }
+    if value != Vec3::ZERO {
+        let eight = [value; 8];
+        let eight: &[f32] = bytemuck::cast_slice(&eight);
+        let floats: &mut [f32] = bytemuck::cast_slice_mut(&mut column[start..]);
+        let mut copies = floats.chunks_exact_mut(eight.len());
+        for copy in &mut copies {
+            copy.copy_from_slice(eight);
+        }
+        let rest = copies.into_remainder();
+        rest.copy_from_slice(&eight[..rest.len()]);
+    }
+}
+
+/// Appends each of `values` `lanes` times over.
+fn extend_with_each_repeated(
+    column: &mut Vec<u32>,
+    values: impl ExactSizeIterator<Item = u32>,
+    lanes: usize,
+) {
+    let len = values.len() * lanes;
+    let written = spare(column, len);
+    // A count of copies known to the compiler makes each value one store.
+    match lanes {
+        1 => write_each_repeated::<1>(written, values),
+        2 => write_each_repeated::<2>(written, values),
+        4 => write_each_repeated::<4>(written, values),
+        8 => write_each_repeated::<8>(written, values),
+        _ => {
+            for (copies, value) in written.chunks_exact_mut(lanes.max(1)).zip(values) {
+                copies.fill(MaybeUninit::new(value));
+            }
+        }
+    }
+    // SAFETY: every arm wrote all `len` spare elements.
+    unsafe { commit(column, len) }
+}
+
+fn write_each_repeated<const LANES: usize>(
+    written: &mut [MaybeUninit<u32>],
+    values: impl Iterator<Item = u32>,
+) {
+    for (copies, value) in written.chunks_exact_mut(LANES).zip(values) {
+        copies.copy_from_slice(&[MaybeUninit::new(value); LANES]);
     }
 }
 
@@ -931,8 +1035,20 @@ pub(crate) mod test_support {
 #[cfg(test)]
 mod tests {
     use super::test_support::{ray, read_rays, Fixture};
-    use super::RayWriter;
+    use super::{runs_of, RayRecord, RayWriter};
     use glam::Vec3;
+
+    #[test]
+    fn runs_of_equal_keys_cover_every_index_in_order() {
+        let keys = [true, true, false, true, false, false, false];
+        let runs: Vec<_> = runs_of(keys.len(), |index| keys[index]).collect();
+        assert_eq!(
+            runs,
+            [(true, 0..2), (false, 2..3), (true, 3..4), (false, 4..7)]
+        );
+        assert_eq!(runs_of(0, |_| unreachable!("no index")).count(), 0);
+        assert_eq!(runs_of(3, |_| false).collect::<Vec<_>>(), [(false, 0..3)]);
+    }
 
     /// Records come out in the order written, a few at a time.
     #[test]
@@ -951,5 +1067,36 @@ mod tests {
         let samples: Vec<u32> = rays.iter().map(|r| r.sample).collect();
         assert_eq!(samples, [0, 1, 10, 11, 20, 21, 99]);
         assert_eq!(rays[6], ray(Vec3::ONE, Vec3::X, 2.0, 99));
+    }
+
+    /// Runs of misses' dead rays, written a column at a time, are the
+    /// records written one by one, after and before other rays, for every
+    /// fanout the copies are specialised for and others, and run lengths
+    /// around the eight-ray copies.
+    #[test]
+    fn dead_rays_of_a_run_of_misses_are_written_column_by_column() {
+        let fixture = Fixture::new();
+        for lanes in [0, 1, 2, 3, 4, 5, 8] {
+            for misses in [0, 1, 2, 7, 8, 9, 17] {
+                let samples: Vec<u32> = (0..misses).map(|miss| 3 * miss + 1).collect();
+                let depths: Vec<u32> = (0..misses).map(|miss| miss % 3).collect();
+                let live = ray(Vec3::ONE, Vec3::X, 2.0, 99);
+                let mut column = fixture.rays(&[]);
+                let mut writer = RayWriter::new(&mut column, 0).unwrap();
+                writer.extend_with(1, |_| live);
+                writer.extend_dead(&samples, depths.iter().copied(), lanes);
+                writer.extend_with(1, |_| live);
+                let mut expected = vec![live];
+                for (&sample, &depth) in samples.iter().zip(&depths) {
+                    expected.extend(std::iter::repeat_n(RayRecord::dead(sample, depth), lanes));
+                }
+                expected.push(live);
+                assert_eq!(
+                    read_rays(&column),
+                    expected,
+                    "{lanes} lanes, {misses} misses"
+                );
+            }
+        }
     }
 }

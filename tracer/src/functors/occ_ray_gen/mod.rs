@@ -18,8 +18,8 @@ use crate::functors::wgsl::{
     diagonal_failure, random_module, sampling_module, surface_module, vector_module, TwinParts,
 };
 use crate::functors::{
-    above_plane, named_f32, offset_origin, scene_diagonal, RayRecord, RayWriter, SurfaceColumns,
-    SURFACE_EPSILON,
+    above_plane, named_f32, offset_origin, runs_of, scene_diagonal, RayRecord, RayWriter,
+    SurfaceColumns, SURFACE_EPSILON,
 };
 use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
@@ -78,12 +78,18 @@ fn run_cpu(
     let surfaces = SurfaceColumns::new(&inputs[0]);
     let lanes = ctx.group;
     let mut out = RayWriter::new(&mut outputs[0], surfaces.len() * lanes)?;
-    // A miss's rays are dead and read three of its surface's ten fields; a
-    // hit's are made in batches, which are appended before the next dead rays
-    // so that every ray lands at its place.
+    // A run of misses gives dead rays, which read three of the surfaces' ten
+    // fields; a hit's rays are made in batches, which are appended before the
+    // next dead rays so that every ray lands at its place.
     let mut batch = LiveRays::default();
-    for index in 0..surfaces.len() {
-        if reaches && surfaces.hit[index] {
+    for (live, run) in runs_of(surfaces.len(), |index| reaches && surfaces.hit[index]) {
+        if !live {
+            batch.make(&surfaces, epsilon, length, &mut out);
+            let depths = surfaces.depth[run.clone()].iter().copied();
+            out.extend_dead(&surfaces.sample[run], depths, lanes);
+            continue;
+        }
+        for index in run {
             for lane in 0..lanes {
                 batch.surface[batch.len] = index;
                 batch.lane[batch.len] = lane as u32;
@@ -92,10 +98,6 @@ fn run_cpu(
                     batch.make(&surfaces, epsilon, length, &mut out);
                 }
             }
-        } else {
-            batch.make(&surfaces, epsilon, length, &mut out);
-            let dead = RayRecord::dead(surfaces.sample[index], surfaces.depth[index]);
-            out.extend_with(lanes, |_| dead);
         }
     }
     batch.make(&surfaces, epsilon, length, &mut out);
@@ -423,8 +425,9 @@ mod tests {
     fn rays_of_hits_and_misses_land_at_their_surfaces_places() {
         let fixture = Fixture::new();
         let records: Vec<SurfaceRecord> = (0..23)
-            .map(|index| match index % 5 {
-                1 | 4 => SurfaceRecord::miss(index, Vec3::ONE, 1),
+            .map(|index| match index % 7 {
+                // Runs of one and of three misses.
+                1 | 3..=5 => SurfaceRecord::miss(index, Vec3::ONE, 1),
                 _ => surface(Vec3::new(0.3, -0.2, 1.0).normalize(), index, 1),
             })
             .collect();
@@ -434,7 +437,7 @@ mod tests {
             .flat_map(|index| run(&records[index..=index], index))
             .collect();
         assert_eq!(whole, alone);
-        assert_eq!(whole.iter().filter(|ray| ray.tmax > 0.0).count(), 3 * 14);
+        assert_eq!(whole.iter().filter(|ray| ray.tmax > 0.0).count(), 3 * 10);
     }
 
     #[test]

@@ -15,7 +15,9 @@ use crate::functors::tracer_functor;
 use crate::functors::wgsl::{
     diagonal_failure, request_resources, surface_module, vector_module, TwinParts,
 };
-use crate::functors::{scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON};
+use crate::functors::{
+    runs_of, scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON,
+};
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
@@ -62,31 +64,34 @@ fn run_cpu(
     let epsilon = SURFACE_EPSILON * scene_diagonal(ctx, "shadowRay")?;
     let surfaces = SurfaceColumns::new(&inputs[0]);
     let mut out = RayWriter::new(&mut outputs[0], surfaces.len() * lanes)?;
-    for index in 0..surfaces.len() {
-        let dead = RayRecord::dead(surfaces.sample[index], surfaces.depth[index]);
-        if !surfaces.hit[index] {
-            // A miss reads two more of the surface's fields, not all ten.
-            out.extend_with(lanes, |_| dead);
+    for (hit, run) in runs_of(surfaces.len(), |index| surfaces.hit[index]) {
+        if !hit {
+            // A run of misses reads two more of the surfaces' fields, not all ten.
+            let depths = surfaces.depth[run.clone()].iter().copied();
+            out.extend_dead(&surfaces.sample[run], depths, lanes);
             continue;
         }
-        let surface = surfaces.get(index);
-        let origin = surface.offset_origin(epsilon);
-        out.extend_with(lanes, |lane| {
-            let to_light = lights[lane].position - origin;
-            let distance = to_light.length();
-            let tmax = distance - epsilon;
-            if !(surface.normal.dot(to_light) > 0.0 && tmax > 0.0) {
-                return dead;
-            }
-            RayRecord {
-                origin,
-                dir: to_light / distance,
-                tmax,
-                sample: surface.sample,
-                weight: surface.weight,
-                depth: surface.depth,
-            }
-        });
+        for index in run {
+            let dead = RayRecord::dead(surfaces.sample[index], surfaces.depth[index]);
+            let surface = surfaces.get(index);
+            let origin = surface.offset_origin(epsilon);
+            out.extend_with(lanes, |lane| {
+                let to_light = lights[lane].position - origin;
+                let distance = to_light.length();
+                let tmax = distance - epsilon;
+                if !(surface.normal.dot(to_light) > 0.0 && tmax > 0.0) {
+                    return dead;
+                }
+                RayRecord {
+                    origin,
+                    dir: to_light / distance,
+                    tmax,
+                    sample: surface.sample,
+                    weight: surface.weight,
+                    depth: surface.depth,
+                }
+            });
+        }
     }
     Ok(())
 }
