@@ -601,6 +601,35 @@ impl<'a> SurfaceWriter<'a> {
         self.extend_with(1, |_| surface);
     }
 
+    /// Appends the records of a run of misses ([`SurfaceRecord::miss`]) of
+    /// these samples, weights and depths, a column at a time: fills and
+    /// copies, not ten interleaved streams of scalar stores (most rays of a
+    /// view with much background miss).
+    pub fn extend_misses(
+        &mut self,
+        samples: &[u32],
+        weights: impl ExactSizeIterator<Item = Vec3>,
+        depths: &[u32],
+    ) {
+        let miss = SurfaceRecord::miss(0, Vec3::ZERO, 0);
+        let len = samples.len();
+        for (column, value) in [
+            (&mut *self.position, miss.position),
+            (&mut *self.normal, miss.normal),
+            (&mut *self.view, miss.view),
+            (&mut *self.geometric, miss.geometric),
+        ] {
+            extend_with_copies_of_vec3(column, len, value);
+        }
+        self.scalar.resize(self.scalar.len() + len, miss.scalar);
+        self.material
+            .resize(self.material.len() + len, miss.material);
+        self.hit.resize(self.hit.len() + len, miss.hit);
+        self.sample.extend_from_slice(samples);
+        self.weight.extend(weights);
+        self.depth.extend_from_slice(depths);
+    }
+
     /// Appends `len` records, record `i` being `surface(i)`, in one pass that
     /// writes every column straight into its spare capacity (no per-element
     /// capacity checks).

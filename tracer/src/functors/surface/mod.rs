@@ -24,7 +24,7 @@ use crate::functors::tracer_functor;
 use crate::functors::wgsl::{
     f32_literal, mesh_module, request_resources, vector_module, TwinParts,
 };
-use crate::functors::{HitColumns, RayColumns, SurfaceRecord, SurfaceWriter, MISS_PRIM};
+use crate::functors::{runs_of, HitColumns, RayColumns, SurfaceRecord, SurfaceWriter, MISS_PRIM};
 use crate::prefetch::{prefetch, prefetch_hit_ahead};
 use crate::scene::TraceResources;
 use crate::vector::unit_or_zero;
@@ -110,18 +110,11 @@ fn run_cpu(
             }
         })
     };
-    let mut out = SurfaceWriter::new(&mut outputs[0])?;
-    out.extend_with(len, |index| {
+    // The surface a live ray hit.
+    let hit_surface = |index: usize| {
         prefetch_ahead(index);
         let (sample, depth) = (samples[index], depths[index]);
-        let alive = tmaxs[index] > 0.0;
-        if !alive {
-            return SurfaceRecord::miss(sample, Vec3::ZERO, depth);
-        }
         let prim = prims[index];
-        if prim == MISS_PRIM {
-            return SurfaceRecord::miss(sample, weights[index], depth);
-        }
         let [a, b, c] = triangles[prim as usize].map(|vertex| vertex as usize);
         let (u, v) = (us[index], vs[index]);
         let w = 1.0 - u - v;
@@ -165,7 +158,24 @@ fn run_cpu(
             depth,
             geometric: facing,
         }
-    });
+    };
+    let mut out = SurfaceWriter::new(&mut outputs[0])?;
+    for (live, run) in runs_of(len, |index| live_prim(index).is_some()) {
+        if live {
+            out.extend_with(run.len(), |offset| hit_surface(run.start + offset));
+        } else {
+            // Misses, a run at a time ([`SurfaceRecord::miss`]): a dead ray's
+            // weight is zero, a live ray's is its own.
+            let weights = run.clone().map(|index| {
+                if tmaxs[index] > 0.0 {
+                    weights[index]
+                } else {
+                    Vec3::ZERO
+                }
+            });
+            out.extend_misses(&samples[run.clone()], weights, &depths[run]);
+        }
+    }
     Ok(())
 }
 
@@ -301,15 +311,18 @@ mod tests {
         reflected.weight = Vec3::splat(0.5);
         reflected.depth = 1;
         let dead = RayRecord::dead(3, 2);
+        // A hit, then a run of a miss and a dead ray, then a hit again.
         let rays = fixture.rays(&[
             ray(Vec3::new(3.0, 3.0, 1.0), Vec3::NEG_Z, 9.0, 0),
             reflected,
             dead,
+            ray(Vec3::new(3.0, 3.0, 1.0), Vec3::NEG_Z, 9.0, 4),
         ]);
         let hit = fixture.hits(&[
             (1.0, 1, 0.2, 0.2),
             (f32::INFINITY, MISS_PRIM, 0.0, 0.0),
             (f32::INFINITY, MISS_PRIM, 0.0, 0.0),
+            (1.0, 1, 0.2, 0.2),
         ]);
         let out = fixture
             .run("surface", &[], 0, &[rays.view(), hit.view()])
@@ -320,6 +333,13 @@ mod tests {
         assert_eq!(surfaces[1], SurfaceRecord::miss(1, Vec3::splat(0.5), 1));
         assert!(!surfaces[1].hit);
         assert_eq!(surfaces[2], SurfaceRecord::miss(3, Vec3::ZERO, 2));
+        assert_eq!(
+            surfaces[3],
+            SurfaceRecord {
+                sample: 4,
+                ..surfaces[0]
+            }
+        );
     }
 
     #[test]
