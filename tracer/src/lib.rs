@@ -33,7 +33,7 @@ pub use shading::{PointLight, SceneFile, Shading, ShadingError, ShadingOverrides
 use dpp_runtime::{ElemType, FunctorLibrary, HostType, HostValue, RecordId, RecordType, Uniforms};
 
 /// The uniform fields the tracer fills, by record: `(record, field, type)`.
-pub const UNIFORM_FIELDS: [(&str, &str, HostType); 16] = [
+pub const UNIFORM_FIELDS: [(&str, &str, HostType); 17] = [
     ("camera", "width", HostType::Int),
     ("camera", "height", HostType::Int),
     ("camera", "pixels", HostType::Int),
@@ -49,6 +49,7 @@ pub const UNIFORM_FIELDS: [(&str, &str, HostType); 16] = [
     ("scene", "diagonal", HostType::Float),
     ("scene", "lights", HostType::Int),
     ("scene", "materials", HostType::Int),
+    ("scene", "mirrors", HostType::Int),
     ("scene", "background", HostType::Vec3),
 ];
 
@@ -181,6 +182,13 @@ pub fn uniforms(scene: &TraceScene, camera: &CameraSetup, shading: &Shading) -> 
     uniforms.set("scene", "lights", HostValue::Int(lights));
     let materials = shading.materials().len() as i64;
     uniforms.set("scene", "materials", HostValue::Int(materials));
+    // A pipeline stops its bounces where nothing can reflect.
+    let mirrors = shading
+        .materials()
+        .iter()
+        .filter(|m| m.reflectivity > 0.0)
+        .count() as i64;
+    uniforms.set("scene", "mirrors", HostValue::Int(mirrors));
     uniforms.set("scene", "background", vec3(shading.background()));
     uniforms
 }
@@ -197,7 +205,7 @@ mod tests {
         let scene = TraceScene::builtin(builtin_scene::MIN_RESOLUTION).unwrap();
         let camera = Camera::standard(StandardView::Front, &scene.bounds, 32, 16).unwrap();
         let shading = Shading::for_scene(&scene);
-        let values = uniforms(&scene, &CameraSetup::new(camera), &shading);
+        let values = uniforms(&scene, &CameraSetup::new(camera.clone()), &shading);
         let mut filled = 0;
         for (record, fields) in &library.uniforms.records {
             for (field, ty) in fields {
@@ -217,6 +225,19 @@ mod tests {
             Some(HostValue::Int(scene.mesh.triangles.len() as i64))
         );
         assert_eq!(values.get("scene", "lights"), Some(HostValue::Int(2)));
+        let mirrors = |shading: &Shading| {
+            let values = uniforms(&scene, &CameraSetup::new(camera.clone()), shading);
+            values.get("scene", "mirrors")
+        };
+        assert_eq!(mirrors(&shading), Some(HostValue::Int(0)));
+        let mut mirrored = shading.clone();
+        let first = mirrored.materials()[0].name.clone();
+        let spec = shading::MaterialSpec {
+            reflectivity: Some(0.5),
+            ..Default::default()
+        };
+        mirrored.set_material(&first, &spec).unwrap();
+        assert_eq!(mirrors(&mirrored), Some(HostValue::Int(1)));
         let center = values.get("scene", "center").unwrap().as_vec3().unwrap();
         assert_eq!(center, scene.bounds.center());
         assert_eq!(
