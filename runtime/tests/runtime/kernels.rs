@@ -465,44 +465,47 @@ fn combining_scatter_of_parts_is_sequential_on_any_thread_count() {
     let initial: Vec<f32> = (0..dst_len).map(|slot| (slot % 7) as f32 * 0.1).collect();
     // Part `p` writes a run of slots from its own start, with a stride that
     // crosses the others' runs, and values of very different magnitudes.
-    let parts: Vec<(Vec<u32>, Vec<f32>, Option<Vec<bool>>)> = (0..23u32)
+    struct OwnedPart {
+        indices: Vec<u32>,
+        values: Column,
+        mask: Option<Vec<bool>>,
+    }
+    let owned: Vec<OwnedPart> = (0..23u32)
         .map(|p| {
             let len = 9_000 + 1_000 * p as usize;
-            let indices = (0..len as u32)
-                .map(|i| (p * 13_001 + i * (1 + p % 5)) % dst_len as u32)
-                .collect();
-            let values = (0..len)
-                .map(|i| if i % 3 == 0 { 1.0e7 } else { 0.3 + p as f32 } * if p % 2 == 0 { 1.0 } else { -1.0 })
-                .collect();
-            let mask = (p % 4 == 1).then(|| (0..len).map(|i| i % 5 != 0).collect());
-            (indices, values, mask)
+            let sign = if p % 2 == 0 { 1.0 } else { -1.0 };
+            OwnedPart {
+                indices: (0..len as u32)
+                    .map(|i| (p * 13_001 + i * (1 + p % 5)) % dst_len as u32)
+                    .collect(),
+                values: Column::F32(
+                    (0..len)
+                        .map(|i| sign * if i % 3 == 0 { 1.0e7 } else { 0.3 + p as f32 })
+                        .collect(),
+                ),
+                mask: (p % 4 == 1).then(|| (0..len).map(|i| i % 5 != 0).collect()),
+            }
+        })
+        .collect();
+    let scatter_parts: Vec<ScatterPart<'_>> = owned
+        .iter()
+        .map(|part| ScatterPart {
+            indices: &part.indices,
+            src: part.values.view(),
+            mask: part.mask.as_deref(),
         })
         .collect();
     let mut expected = Column::F32(initial.clone());
-    for (indices, values, mask) in &parts {
-        let values = Column::F32(values.clone());
+    for part in &scatter_parts {
         scatter_combine(
             MonoidOp::Add,
-            indices,
-            &values.view(),
-            mask.as_deref(),
+            part.indices,
+            &part.src,
+            part.mask,
             &mut expected,
         )
         .unwrap();
     }
-    let columns: Vec<Column> = parts
-        .iter()
-        .map(|(_, values, _)| Column::F32(values.clone()))
-        .collect();
-    let scatter_parts: Vec<ScatterPart<'_>> = parts
-        .iter()
-        .zip(&columns)
-        .map(|((indices, _, mask), values)| ScatterPart {
-            indices,
-            src: values.view(),
-            mask: mask.as_deref(),
-        })
-        .collect();
     for threads in [1, 2, 3, 8] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
