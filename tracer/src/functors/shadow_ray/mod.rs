@@ -16,13 +16,14 @@ use crate::functors::wgsl::{
     diagonal_failure, request_resources, surface_module, vector_module, TwinParts,
 };
 use crate::functors::{
-    runs_of, scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SURFACE_EPSILON,
+    runs_of, scene_diagonal, RayRecord, RayWriter, SurfaceColumns, SurfaceRecord, SURFACE_EPSILON,
 };
 use crate::scene::TraceResources;
 use dpp_runtime::wgsl::WgslRequest;
 use dpp_runtime::{
     CallContext, Column, ColumnView, ElemType, Functor, FunctorError, RecordId, Signature,
 };
+use glam::Vec3;
 use std::sync::Arc;
 
 pub fn functor(surface: RecordId, ray: RecordId) -> Arc<dyn Functor> {
@@ -71,27 +72,36 @@ fn run_cpu(
             out.extend_dead(&surfaces.sample[run], depths, lanes);
             continue;
         }
-        for index in run {
-            let dead = RayRecord::dead(surfaces.sample[index], surfaces.depth[index]);
-            let surface = surfaces.get(index);
-            let origin = surface.offset_origin(epsilon);
-            out.extend_with(lanes, |lane| {
-                let to_light = lights[lane].position - origin;
-                let distance = to_light.length();
-                let tmax = distance - epsilon;
-                if !(surface.normal.dot(to_light) > 0.0 && tmax > 0.0) {
-                    return dead;
-                }
-                RayRecord {
-                    origin,
-                    dir: to_light / distance,
-                    tmax,
-                    sample: surface.sample,
-                    weight: surface.weight,
-                    depth: surface.depth,
-                }
-            });
-        }
+        // A run of hits in one pass, the lanes of a surface in turn; the
+        // surface and the rays' origin are read once per surface.
+        let mut next = (run.start, 0);
+        let (mut surface, mut origin) = (SurfaceRecord::miss(0, Vec3::ZERO, 0), Vec3::ZERO);
+        out.extend_with(run.len() * lanes, |_| {
+            let (index, lane) = next;
+            next = if lane + 1 == lanes {
+                (index + 1, 0)
+            } else {
+                (index, lane + 1)
+            };
+            if lane == 0 {
+                surface = surfaces.get(index);
+                origin = surface.offset_origin(epsilon);
+            }
+            let to_light = lights[lane].position - origin;
+            let distance = to_light.length();
+            let tmax = distance - epsilon;
+            if !(surface.normal.dot(to_light) > 0.0 && tmax > 0.0) {
+                return RayRecord::dead(surface.sample, surface.depth);
+            }
+            RayRecord {
+                origin,
+                dir: to_light / distance,
+                tmax,
+                sample: surface.sample,
+                weight: surface.weight,
+                depth: surface.depth,
+            }
+        });
     }
     Ok(())
 }
@@ -172,6 +182,35 @@ mod tests {
         assert_eq!(rays[0].origin, Vec3::new(0.5, 0.5, epsilon));
         let blocked = fixture.run("occluded", &[], 0, &[out[0].view()]).unwrap();
         assert_eq!(blocked[0].view().as_bool(), &[false]);
+    }
+
+    /// Runs of hits and of misses, several lights: each surface's rays are
+    /// those it makes alone, at its place.
+    #[test]
+    fn rays_of_runs_of_hits_and_misses_land_at_their_surfaces_places() {
+        let mut fixture = Fixture::new();
+        let lights = vec![
+            PointLight::new(Vec3::new(0.0, 0.0, 4.0), 1.0),
+            PointLight::new(Vec3::new(6.0, 0.0, 1.0), 1.0),
+            PointLight::new(Vec3::new(0.0, 0.0, -3.0), 1.0),
+        ];
+        fixture.set_shading(|shading| shading.set_lights(lights).unwrap());
+        let records: Vec<SurfaceRecord> = (0..11)
+            .map(|index| match index % 5 {
+                1 | 2 => SurfaceRecord::miss(index, Vec3::ONE, 1),
+                _ => surface_hit(Vec3::new(0.1 * index as f32, 0.5, 0.0), Vec3::Z, index),
+            })
+            .collect();
+        let run = |surfaces: &[SurfaceRecord]| {
+            let column = fixture.surfaces(surfaces);
+            let out = fixture.run_grouped("shadowRay", &[], 3, 0, &[column.view()]);
+            read_rays(&out.unwrap()[0])
+        };
+        let alone: Vec<RayRecord> = records
+            .iter()
+            .flat_map(|record| run(std::slice::from_ref(record)))
+            .collect();
+        assert_eq!(run(&records), alone);
     }
 
     #[test]
