@@ -113,16 +113,22 @@ mod tests {
     use crate::shading::PointLight;
     use glam::Vec3;
 
-    #[test]
-    fn one_ray_per_light_towards_it() {
+    /// The default fixture lit by three lights: above, beside and below the
+    /// z = 0 plane (behind a surface facing +z).
+    fn three_lights() -> Fixture {
         let mut fixture = Fixture::new();
         let lights = vec![
             PointLight::new(Vec3::new(0.0, 0.0, 4.0), 1.0),
             PointLight::new(Vec3::new(6.0, 0.0, 1.0), 1.0),
-            // Below the z = 0 plane: behind a surface facing +z.
             PointLight::new(Vec3::new(0.0, 0.0, -3.0), 1.0),
         ];
         fixture.set_shading(|shading| shading.set_lights(lights).unwrap());
+        fixture
+    }
+
+    #[test]
+    fn one_ray_per_light_towards_it() {
+        let fixture = three_lights();
         let diagonal = fixture.resources.scene.bounds.diagonal();
         let epsilon = SURFACE_EPSILON * diagonal;
         let surfaces = fixture.surfaces(&[
@@ -188,13 +194,7 @@ mod tests {
     /// those it makes alone, at its place.
     #[test]
     fn rays_of_runs_of_hits_and_misses_land_at_their_surfaces_places() {
-        let mut fixture = Fixture::new();
-        let lights = vec![
-            PointLight::new(Vec3::new(0.0, 0.0, 4.0), 1.0),
-            PointLight::new(Vec3::new(6.0, 0.0, 1.0), 1.0),
-            PointLight::new(Vec3::new(0.0, 0.0, -3.0), 1.0),
-        ];
-        fixture.set_shading(|shading| shading.set_lights(lights).unwrap());
+        let fixture = three_lights();
         let records: Vec<SurfaceRecord> = (0..11)
             .map(|index| match index % 5 {
                 1 | 2 => SurfaceRecord::miss(index, Vec3::ONE, 1),
