@@ -303,9 +303,7 @@ impl<'a> RayWriter<'a> {
             commit(self.depth, len);
         }
     }
-}
 
-impl RayWriter<'_> {
     /// Appends `lanes` dead rays ([`RayRecord::dead`]) for each of a run of
     /// misses, whose samples and depths these are, a column at a time: fills
     /// and copies, not six interleaved streams of scalar stores. (Most
@@ -329,8 +327,8 @@ impl RayWriter<'_> {
 }
 
 /// `0..len` cut into maximal runs of consecutive indices with the same
-/// `key`, in order, each with its key: a functor makes a run of misses'
-/// dead rays at once ([`RayWriter::extend_dead`]).
+/// `key`, in order, each with its key: a functor writes a run of misses at
+/// once ([`RayWriter::extend_dead`], [`SurfaceWriter::extend_misses`]).
 pub(crate) fn runs_of(
     len: usize,
     key: impl Fn(usize) -> bool,
