@@ -75,12 +75,14 @@ fn the_preludes_compaction_converts_keep_once() {
     op %7 = reduce<add>(%6)
     let n: int = %7
     op at = iota(0)
-    if float(n) < (dense * float(len(keep))) {
-      op slot = exclusiveScan<add>(%6)
-      op %14 = iota(len(keep))
-      op at = scatter(slot, %14, len: n, mask: keep)
-    } else {
-      op at = iota(len(keep))
+    if n > 0 {
+      if float(n) < (dense * float(len(keep))) {
+        op slot = exclusiveScan<add>(%6)
+        op %14 = iota(len(keep))
+        op at = scatter(slot, %14, len: n, mask: keep)
+      } else {
+        op at = iota(len(keep))
+      }
     }
     op kept = gather(at, values)
     out kept = kept

@@ -866,29 +866,31 @@ fn rule4_compaction_changes_the_length() {
       materialises at: u32
       ends at control flow
     }
-    if float(n#1) < (dense * float(len(keep))) {
-      stage 3 [exclusiveScan<add>] {
-        over n
-        slot = exclusiveScan<add>(%8)
-        reads direct: %8: u32; indexed: -; uniform: -
-        materialises slot: u32
-        ends at scan
-      }
-      stage 4 [iota → scatter] {
-        over n
-        %16 = iota(len(keep))
-        at = scatter(slot, %16, len: n#1, mask: keep)
-        reads direct: slot: u32, keep: bool; indexed: -; uniform: len(keep), n#1
-        materialises at: u32
-        ends at control flow
-      }
-    } else {
-      stage 5 [iota] {
-        over n
-        at = iota(len(keep))
-        reads direct: -; indexed: -; uniform: len(keep)
-        materialises at: u32
-        ends at control flow
+    if n#1 > 0 {
+      if float(n#1) < (dense * float(len(keep))) {
+        stage 3 [exclusiveScan<add>] {
+          over n
+          slot = exclusiveScan<add>(%8)
+          reads direct: %8: u32; indexed: -; uniform: -
+          materialises slot: u32
+          ends at scan
+        }
+        stage 4 [iota → scatter] {
+          over n
+          %16 = iota(len(keep))
+          at = scatter(slot, %16, len: n#1, mask: keep)
+          reads direct: slot: u32, keep: bool; indexed: -; uniform: len(keep), n#1
+          materialises at: u32
+          ends at control flow
+        }
+      } else {
+        stage 5 [iota] {
+          over n
+          at = iota(len(keep))
+          reads direct: -; indexed: -; uniform: len(keep)
+          materialises at: u32
+          ends at control flow
+        }
       }
     }
     stage 6 [gather → map<add>] {

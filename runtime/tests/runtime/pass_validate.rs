@@ -133,18 +133,21 @@ fn a_variable_out_of_range_and_a_stray_break_are_caught() {
 
 #[test]
 fn a_stage_that_reads_its_own_sink_result_is_caught() {
+    /// The first branch, however deeply nested, that holds stages.
+    fn branch_with_stages(nodes: &mut [Node]) -> Option<Vec<Node>> {
+        nodes.iter_mut().find_map(|node| match node {
+            Node::If { then_body, .. } if then_body.iter().any(|n| matches!(n, Node::Stage(_))) => {
+                Some(std::mem::take(then_body))
+            }
+            Node::If { then_body, .. } => branch_with_stages(then_body),
+            _ => None,
+        })
+    }
     let problems = check(true, |plan| {
         // The scan of `compactIndex` and the scatter that reads its result
-        // (the reverse index, in the branch taken when some element is
-        // dropped), forced into one stage.
-        let reverse_index = plan
-            .body
-            .iter_mut()
-            .find_map(|node| match node {
-                Node::If { then_body, .. } => Some(std::mem::take(then_body)),
-                _ => None,
-            })
-            .expect("compactIndex's branch");
+        // (the reverse index, in the branch taken when some element is kept
+        // and some dropped), forced into one stage.
+        let reverse_index = branch_with_stages(&mut plan.body).expect("compactIndex's branch");
         let first = stage_positions(plan)[0];
         if let Node::Stage(stage) = &mut plan.body[first] {
             for node in reverse_index {
