@@ -370,6 +370,20 @@ impl Bvh {
         assert_eq!(written, count, "the traversal answered every ray");
     }
 
+    /// [`Bvh::occluded_batch`], a ray's `tmax` read first: a dead ray's
+    /// other fields are never read. Where the background fills most of a
+    /// view, most occlusion and shadow rays are dead, and reading their
+    /// origins and directions was most of what they cost.
+    pub fn occluded_batch_skipping_dead(
+        &self,
+        count: usize,
+        tmax: impl Fn(usize) -> f32,
+        ray: impl Fn(usize) -> Ray,
+        sink: impl FnMut(&[bool]),
+    ) {
+        wide::occluded_batch(self, Isa::detect(), count, tmax, ray, sink);
+    }
+
     /// [`Bvh::occluded_batch`] on a chosen implementation.
     pub fn occluded_batch_with(
         &self,
@@ -378,7 +392,7 @@ impl Bvh {
         ray: impl Fn(usize) -> Ray,
         sink: impl FnMut(&[bool]),
     ) {
-        wide::occluded_batch(self, isa, count, ray, sink);
+        wide::occluded_batch(self, isa, count, |i| ray(i).tmax, &ray, sink);
     }
 
     /// [`Bvh::intersect_closest`] on a chosen implementation of the wide traversal
@@ -392,7 +406,14 @@ impl Bvh {
     /// [`Bvh::occluded`] (up to `ray.tmax`) on a chosen implementation.
     pub fn occluded_with(&self, ray: &Ray, isa: Isa) -> bool {
         let mut blocked = false;
-        wide::occluded_batch(self, isa, 1, |_| *ray, |found| blocked = found[0]);
+        wide::occluded_batch(
+            self,
+            isa,
+            1,
+            |_| ray.tmax,
+            |_| *ray,
+            |found| blocked = found[0],
+        );
         blocked
     }
 

@@ -1098,7 +1098,8 @@ fn packets_with_directions_along_an_axis_match_binary() {
 /// makes them) and short ambient-occlusion rays around each point (four
 /// per point, every octant) must be blocked exactly when the binary
 /// traversal says so, on every implementation, dead rays included (and
-/// batches of mostly dead rays, which the windows trace without them).
+/// batches of mostly dead rays, which the windows trace without them, and
+/// without reading more of them than their `tmax`).
 #[test]
 fn any_hit_packets_of_shadow_and_occlusion_rays_match_binary() {
     use crate::camera::StandardView;
@@ -1181,6 +1182,17 @@ fn any_hit_packets_of_shadow_and_occlusion_rays_match_binary() {
             bvh.occluded_batch_with(isa, rays.len(), |i| rays[i], |b| got.extend_from_slice(b));
             assert_eq!(got, expected, "{isa:?}");
         }
+        let mut got = Vec::with_capacity(rays.len());
+        bvh.occluded_batch_skipping_dead(
+            rays.len(),
+            |i| rays[i].tmax,
+            |i| {
+                assert!(rays[i].tmax > 0.0, "dead ray {i} was read");
+                rays[i]
+            },
+            |b| got.extend_from_slice(b),
+        );
+        assert_eq!(got, expected);
     }
 }
 

@@ -22,7 +22,6 @@ use crate::huge_pages::{collect_on_huge_pages, vec_on_huge_pages};
 use packet::{is_packet, packet_key, single_rays_below, trace_packet, PacketStack, MAX_PACKET};
 
 use rayon::prelude::*;
-use std::marker::PhantomData;
 
 mod packet;
 
@@ -437,7 +436,7 @@ pub(super) fn trace_batch(
     sink: impl FnMut(&[Found]),
 ) {
     let ray = |index| bvh.to_bvh_space(&ray(index));
-    dispatch(isa, Batch::<_, _, ClosestHits>::new(bvh, count, ray, sink));
+    dispatch(isa, Batch::new(bvh, count, ray, sink, ClosestHits));
 }
 
 /// Whether each of the rays `ray(0..count)` is blocked (any hit), to `sink` in
@@ -447,11 +446,12 @@ pub(super) fn occluded_batch(
     bvh: &Bvh,
     isa: Isa,
     count: usize,
+    tmax: impl Fn(usize) -> f32,
     ray: impl Fn(usize) -> Ray,
     sink: impl FnMut(&[bool]),
 ) {
     let ray = |index| bvh.to_bvh_space(&ray(index));
-    dispatch(isa, Batch::<_, _, AnyHits>::new(bvh, count, ray, sink));
+    dispatch(isa, Batch::new(bvh, count, ray, sink, AnyHits { tmax }));
 }
 
 /// A batch's traversal on the lanes an [`Isa`] gives: `S` tests boxes, `T`
@@ -523,30 +523,34 @@ struct Batch<'a, R, K, Query> {
     count: usize,
     ray: R,
     sink: K,
-    query: PhantomData<Query>,
+    query: Query,
 }
 
 impl<'a, R, K, Query> Batch<'a, R, K, Query> {
-    fn new(bvh: &'a Bvh, count: usize, ray: R, sink: K) -> Self {
+    fn new(bvh: &'a Bvh, count: usize, ray: R, sink: K, query: Query) -> Self {
         Batch {
             bvh,
             count,
             ray,
             sink,
-            query: PhantomData,
+            query,
         }
     }
 
-    fn into_parts(self) -> (&'a Bvh, usize, R, K) {
-        (self.bvh, self.count, self.ray, self.sink)
+    fn into_parts(self) -> (&'a Bvh, usize, R, K, Query) {
+        (self.bvh, self.count, self.ray, self.sink, self.query)
     }
 }
 
 /// A [`Batch`] of closest-hit queries, answered as [`Found`]s.
 struct ClosestHits;
 
-/// A [`Batch`] of any-hit queries, answered as whether each ray is blocked.
-struct AnyHits;
+/// A [`Batch`] of any-hit queries, answered as whether each ray is blocked;
+/// `tmax(i)` is ray `i`'s, read alone so that a dead ray's other fields are
+/// never read.
+struct AnyHits<L> {
+    tmax: L,
+}
 
 impl<R: Fn(usize) -> Ray, K: FnMut(&[Found])> BatchJob for Batch<'_, R, K, ClosestHits> {
     const SIXTEEN_LANES_ON_AVX2: bool = true;
@@ -555,7 +559,7 @@ impl<R: Fn(usize) -> Ray, K: FnMut(&[Found])> BatchJob for Batch<'_, R, K, Close
     /// coherent rays of a camera), else one by one.
     #[inline(always)]
     fn run<S: Lanes8, T: Lanes>(self, boxes: S, triangles: T) {
-        let (bvh, count, ray, mut sink) = self.into_parts();
+        let (bvh, count, ray, mut sink, ClosestHits) = self.into_parts();
         let mut stack = Stack::new();
         let mut packet_stack = PacketStack::new();
         let mut index = 0;
@@ -596,17 +600,26 @@ impl<R: Fn(usize) -> Ray, K: FnMut(&[Found])> BatchJob for Batch<'_, R, K, Close
     }
 }
 
-impl<R: Fn(usize) -> Ray, K: FnMut(&[bool])> BatchJob for Batch<'_, R, K, AnyHits> {
+impl<R: Fn(usize) -> Ray, K: FnMut(&[bool]), L: Fn(usize) -> f32> BatchJob
+    for Batch<'_, R, K, AnyHits<L>>
+{
     const SIXTEEN_LANES_ON_AVX2: bool = false;
 
     #[inline(always)]
     fn run<S: Lanes8, T: Lanes>(self, boxes: S, triangles: T) {
-        let (bvh, count, ray, mut sink) = self.into_parts();
+        let (bvh, count, ray, mut sink, AnyHits { tmax }) = self.into_parts();
         let mut window = AnyHitWindow::new();
         let mut index = 0;
         while index < count {
             let len = (count - index).min(ANY_HIT_WINDOW);
-            let blocked = window.trace(boxes, triangles, bvh, |i| ray(index + i), len);
+            let blocked = window.trace(
+                boxes,
+                triangles,
+                bvh,
+                |i| tmax(index + i),
+                |i| ray(index + i),
+                len,
+            );
             sink(blocked);
             index += len;
         }
@@ -656,6 +669,7 @@ impl AnyHitWindow {
         boxes: S,
         triangles: T,
         bvh: &Bvh,
+        tmax: impl Fn(usize) -> f32,
         ray: impl Fn(usize) -> Ray,
         len: usize,
     ) -> &[bool] {
@@ -663,9 +677,9 @@ impl AnyHitWindow {
         let mut starts = [0usize; PACKET_KEYS + 1];
         let mut live = 0;
         for i in 0..len {
-            let ray = ray(i);
             // False for NaN too.
-            if ray.tmax > 0.0 {
+            if tmax(i) > 0.0 {
+                let ray = ray(i);
                 let key = packet_key(&ray) as usize;
                 self.rays[live] = ray;
                 self.place[live] = i as u16;

@@ -36,8 +36,9 @@ fn run_cpu(
     let blocked = outputs[0].as_bool_mut();
     blocked.reserve(rays.len());
     // Dead rays (tmax <= 0) are never blocked.
-    bvh.occluded_batch(
+    bvh.occluded_batch_skipping_dead(
         rays.len(),
+        |index| rays.tmax[index],
         |index| rays.get(index),
         |window| blocked.extend_from_slice(window),
     );
