@@ -165,14 +165,18 @@ fn packets(n: usize) -> impl Iterator<Item = (usize, usize)> {
 }
 
 /// Rays `start .. start + lanes` into the first lanes of `packet`; the mask
-/// of the live ones (`tmax > 0`).
+/// of the live ones (`tmax > 0`), or `None` where none is live: such a
+/// packet is answered without asking Embree (as dpp's traversal answers
+/// dead rays without a traversal), which is what a harness of one's own
+/// would do with a run of misses' dead rays.
 fn load_packet(
     packet: &mut Ray16,
     rays: &RayColumns<'_>,
     start: usize,
     lanes: usize,
-) -> ValidMaskN<16> {
+) -> Option<ValidMaskN<16>> {
     let mut valid = ValidMaskN::<16>::new([ValidMask::Invalid; 16]);
+    let mut any_live = false;
     for lane in 0..lanes {
         let index = start + lane;
         packet.set_org(lane, rays.origin[index].to_array());
@@ -184,9 +188,10 @@ fn load_packet(
         packet.set_flags(lane, 0);
         if rays.tmax[index] > 0.0 {
             valid.lanes_mut()[lane] = ValidMask::Valid;
+            any_live = true;
         }
     }
-    valid
+    any_live.then_some(valid)
 }
 
 /// `intersect` through Embree; see the module documentation.
@@ -228,8 +233,9 @@ fn intersect(
                 for (start, lanes) in packets(n) {
                     packet.hit.geomID = [INVALID_ID; 16];
                     packet.hit.primID = [INVALID_ID; 16];
-                    let valid = load_packet(&mut packet.ray, &rays, start, lanes);
-                    scene.intersect16(&mut context, &mut packet, &valid);
+                    if let Some(valid) = load_packet(&mut packet.ray, &rays, start, lanes) {
+                        scene.intersect16(&mut context, &mut packet, &valid);
+                    }
                     // A packet's hits at a time, as dpp's traversal writes them.
                     let packet_hits = (0..lanes).map(|lane| {
                         (packet.hit.geomID[lane] != INVALID_ID).then(|| crate::bvh::HitRecord {
@@ -272,10 +278,14 @@ fn occluded(
         EmbreeMode::Packet16 => {
             let mut packet = Ray16::empty();
             for (start, lanes) in packets(n) {
-                let valid = load_packet(&mut packet, &rays, start, lanes);
-                scene.occluded16(&mut context, &mut packet, &valid);
-                // Embree marks a blocked ray by setting its `tfar` to -inf.
-                blocked.extend((0..lanes).map(|lane| packet.tfar(lane) == f32::NEG_INFINITY));
+                if let Some(valid) = load_packet(&mut packet, &rays, start, lanes) {
+                    scene.occluded16(&mut context, &mut packet, &valid);
+                }
+                // Embree marks a blocked ray by setting its `tfar` to -inf (a
+                // dead ray's own `tmax` may be -inf: it is never blocked).
+                blocked.extend((0..lanes).map(|lane| {
+                    rays.tmax[start + lane] > 0.0 && packet.tfar(lane) == f32::NEG_INFINITY
+                }));
             }
         }
     }
@@ -377,10 +387,13 @@ mod tests {
         let fixture = Fixture::new();
         // Enough rays for a full packet, a partial one, and dead rays among them.
         let mut rays = read_rays(&probe_rays(&fixture));
-        rays = rays.iter().cycle().take(37).copied().collect();
+        rays = rays.iter().cycle().take(53).copied().collect();
         rays[5].tmax = 0.0;
         rays[9].tmax = -1.0;
-        rays[17].tmax = f32::NAN;
+        // A whole packet of dead rays, which Embree is not asked about.
+        for (i, ray) in rays[16..32].iter_mut().enumerate() {
+            ray.tmax = [0.0, f32::NAN, f32::NEG_INFINITY][i % 3];
+        }
         let rays = fixture.rays(&rays);
         let expected = hits(&fixture, &fixture.library, &rays);
         assert!(expected[1].contains(&(MISS_PRIM as f32)));
@@ -408,9 +421,13 @@ mod tests {
     fn embree_occlusion_means_what_the_cpu_occlusion_means() {
         let fixture = Fixture::new();
         let mut rays = read_rays(&probe_rays(&fixture));
-        rays = rays.iter().cycle().take(37).copied().collect();
+        rays = rays.iter().cycle().take(53).copied().collect();
         rays[4].tmax = 0.0;
-        rays[20].tmax = f32::NAN;
+        rays[9].tmax = f32::NEG_INFINITY;
+        // A whole packet of dead rays, which Embree is not asked about.
+        for (i, ray) in rays[16..32].iter_mut().enumerate() {
+            ray.tmax = [0.0, f32::NAN, f32::NEG_INFINITY][i % 3];
+        }
         let rays = fixture.rays(&rays);
         let blocked = |library: &FunctorLibrary| {
             let blocked = run_on_rays(&fixture, library, "occluded", ElemType::Bool, &rays);
@@ -418,7 +435,10 @@ mod tests {
         };
         let expected = blocked(&fixture.library);
         assert!(expected.contains(&true) && expected.contains(&false));
-        assert!(!expected[4] && !expected[20], "dead rays are never blocked");
+        assert!(
+            !expected[4] && !expected[9] && !expected[20],
+            "dead rays are never blocked"
+        );
         for (robust, scene) in both_embree_scenes(&fixture) {
             for mode in [EmbreeMode::Single, EmbreeMode::Packet16] {
                 let library = library_with_embree(&fixture.library, scene.clone(), mode).unwrap();
