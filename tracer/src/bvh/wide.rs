@@ -441,7 +441,8 @@ pub(super) fn trace_batch(
 
 /// Whether each of the rays `ray(0..count)` is blocked (any hit), to `sink` in
 /// order, an any-hit window's worth at a time ([`AnyHitWindow::trace`]). Dead rays
-/// (`tmax` not above 0) are not traversed and never blocked.
+/// (`tmax` not above 0) are not traversed and never blocked; `tmax(i)` is ray
+/// `i`'s, read first, so that `ray(i)` is called for live rays only.
 pub(super) fn occluded_batch(
     bvh: &Bvh,
     isa: Isa,
