@@ -141,18 +141,39 @@ enum SinkPart {
     Written(Option<(ChunkValue, ChunkValue)>),
     /// A combining scatter: its chunk, to combine into the target in order.
     Scatter {
-        indices: ChunkValue,
-        values: ChunkValue,
-        mask: Option<ChunkValue>,
+        indices: SinkInput,
+        values: SinkInput,
+        mask: Option<SinkInput>,
     },
     Reduce(Element),
     Scan {
-        values: ChunkValue,
-        flags: Option<ChunkValue>,
+        values: SinkInput,
+        flags: Option<SinkInput>,
         total: ScanTotal,
     },
     /// A sort's keys and values: sorted, all chunks together, after the stage.
-    Sort(Vec<ChunkValue>),
+    Sort(Vec<SinkInput>),
+}
+
+/// What a sink that finishes after its stage keeps of one input: the value
+/// as the chunk had it (an array made before the stage), or, for a value the
+/// stage makes, the name of a stage-wide array the chunk copied its range
+/// into. The chunk's own columns then go back to the allocator as the chunk
+/// ends, and the next chunk's reuse them: kept to the end of the stage, each
+/// chunk's were fresh pages, and WORKLOAD3's `map<shader>` took twice its
+/// time faulting in the colours `scatter<add>` kept (docs/benchmarks.md).
+#[derive(Clone)]
+enum SinkInput {
+    Value(ChunkValue),
+    Stored(VarId),
+}
+
+/// The stage-wide arrays its chunks copy their ranges of values into: the
+/// values it materialises, and those its sinks keep ([`SinkInput`]).
+#[derive(Clone, Copy)]
+struct StageArrays<'t> {
+    materialised: &'t [(VarId, SharedTarget)],
+    kept: &'t [(VarId, SharedTarget)],
 }
 
 /// The targets of a stage's plain scatters, which its chunks write directly.
@@ -200,26 +221,19 @@ impl StageRun<'_, '_> {
         let mut direct = self.direct_scatters(stage, host_values)?;
         // Materialised values: each chunk copies its range into them, so no
         // chunk keeps its columns to the end of the stage and nothing is
-        // joined after it.
-        let records = &self.context.library.records;
-        let materialised: Vec<(VarId, SharedTarget)> = elementwise_materialised(stage)
-            .into_iter()
-            .map(|var| {
-                let array = self.context.column_pool.take(
-                    self.elem_type(var),
-                    len,
-                    Contents::Overwritten,
-                    records,
-                );
-                (var, SharedTarget::new(array))
-            })
-            .collect();
+        // joined after it. The same for the values sinks keep.
+        let materialised = self.stage_wide_arrays(elementwise_materialised(stage));
+        let kept = self.stage_wide_arrays(self.sink_kept_values(&direct, &materialised));
         let segments = match self.context.elementwise {
             Elementwise::Compiled => compiled::prepare(self.call),
             Elementwise::Columns => Vec::new(),
         };
+        let stage_arrays = StageArrays {
+            materialised: &materialised,
+            kept: &kept,
+        };
         let results = kernels::run_chunked(len, chunk, |range| {
-            self.run_chunk(stage, host_values, &segments, &direct, &materialised, range)
+            self.run_chunk(stage, host_values, &segments, &direct, &stage_arrays, range)
         })
         .into_iter()
         .collect::<Result<Vec<_>, RunError>>()?;
@@ -235,6 +249,10 @@ impl StageRun<'_, '_> {
         for (var, target) in materialised {
             self.store(var, target.into_column());
         }
+        let kept: Vec<(VarId, Arc<Column>)> = kept
+            .into_iter()
+            .map(|(var, target)| (var, Arc::new(target.into_column())))
+            .collect();
         let sinks = stage
             .ops
             .iter()
@@ -250,8 +268,11 @@ impl StageRun<'_, '_> {
                     &results,
                     number,
                 )?,
-                None => self.finish_sink(op, sink_values, &results, number)?,
+                None => self.finish_sink(op, sink_values, &results, number, &kept)?,
             }
+        }
+        for (_, array) in kept {
+            self.context.column_pool.give(array);
         }
         let compiled = segments
             .iter()
@@ -259,6 +280,87 @@ impl StageRun<'_, '_> {
             .map(|prepared| prepared.segment.ops.clone())
             .collect();
         Ok((op_times, compiled))
+    }
+
+    /// An array of the stage's length for each of `vars`, which its chunks
+    /// write their ranges of.
+    fn stage_wide_arrays(&self, vars: Vec<VarId>) -> Vec<(VarId, SharedTarget)> {
+        let records = &self.context.library.records;
+        vars.into_iter()
+            .map(|var| {
+                let array = self.context.column_pool.take(
+                    self.elem_type(var),
+                    self.call.len,
+                    Contents::Overwritten,
+                    records,
+                );
+                (var, SharedTarget::new(array))
+            })
+            .collect()
+    }
+
+    /// The values made in the stage that its sinks finishing after it read
+    /// (combining scatters, scans and sorts), but for the materialised ones:
+    /// each gets a stage-wide array (see [`SinkInput`]).
+    fn sink_kept_values(
+        &self,
+        direct: &DirectScatters,
+        materialised: &[(VarId, SharedTarget)],
+    ) -> Vec<VarId> {
+        let stage = self.call.stage;
+        let outer_ops = &stage.ops[self.call.inner_level().map_or(0, |(ops, _)| ops)..];
+        // Made by the chunks: a field of an array made before the stage is
+        // read where it is.
+        let made = |mut var: VarId| loop {
+            match outer_ops.iter().find(|op| op.outputs.contains(&var)) {
+                None => return false,
+                Some(op) if matches!(op.kind, OpKind::Field { .. }) => var = op.inputs[0],
+                Some(_) => return true,
+            }
+        };
+        let mut kept = Vec::new();
+        let sinks = stage.ops.iter().filter(|op| op.is_sink());
+        for (number, op) in sinks.enumerate() {
+            let inputs: Vec<VarId> = match &op.kind {
+                OpKind::Scatter {
+                    mask,
+                    combine: Some(_),
+                    ..
+                } if direct.targets[number].is_none() => {
+                    op.inputs[..2].iter().copied().chain(*mask).collect()
+                }
+                OpKind::Scan { segments, .. } => {
+                    op.inputs[..1].iter().copied().chain(*segments).collect()
+                }
+                OpKind::Sort { .. } => op.inputs.clone(),
+                _ => Vec::new(),
+            };
+            for var in inputs {
+                if made(var) && !kept.contains(&var) && !materialised.iter().any(|(v, _)| *v == var)
+                {
+                    kept.push(var);
+                }
+            }
+        }
+        kept
+    }
+
+    /// A sink's input at the end of its stage (`kept`: the stage-wide arrays
+    /// of [`StageRun::sink_kept_values`]).
+    fn sink_input(
+        &self,
+        input: &SinkInput,
+        kept: &[(VarId, Arc<Column>)],
+    ) -> Result<ChunkValue, RunError> {
+        Ok(match input {
+            SinkInput::Value(value) => value.clone(),
+            SinkInput::Stored(var) => {
+                ChunkValue::Whole(match kept.iter().find(|(v, _)| v == var) {
+                    Some((_, array)) => array.clone(),
+                    None => self.array(*var)?.clone(),
+                })
+            }
+        })
     }
 
     /// Binds `var` to `column`, giving the array it held back to the pool.
@@ -432,15 +534,16 @@ impl StageRun<'_, '_> {
         values: &OpHostValues,
         results: &[ChunkResult],
         number: usize,
+        kept: &[(VarId, Arc<Column>)],
     ) -> Result<(), RunError> {
         let records = &self.context.library.records;
+        let input = |input: &SinkInput| self.sink_input(input, kept);
         match &op.kind {
             OpKind::Scatter {
                 combine: Some(combine),
                 ..
             } => {
-                let mut dst = self.scatter_target(op, values, Contents::Zeroed)?;
-                let parts: Vec<_> = results
+                let inputs = results
                     .iter()
                     .map(|result| {
                         let SinkPart::Scatter {
@@ -451,11 +554,22 @@ impl StageRun<'_, '_> {
                         else {
                             unreachable!()
                         };
-                        let range = result.range.clone();
+                        Ok((
+                            input(indices)?,
+                            input(values)?,
+                            mask.as_ref().map(input).transpose()?,
+                        ))
+                    })
+                    .collect::<Result<Vec<_>, RunError>>()?;
+                let parts: Vec<_> = inputs
+                    .iter()
+                    .zip(results)
+                    .map(|((indices, values, mask), result)| {
+                        let range = &result.range;
                         (
-                            indices.view(&range),
-                            values.view(&range),
-                            mask.as_ref().map(|m| m.view(&range)),
+                            indices.view(range),
+                            values.view(range),
+                            mask.as_ref().map(|m| m.view(range)),
                         )
                     })
                     .collect();
@@ -467,6 +581,7 @@ impl StageRun<'_, '_> {
                         mask: mask.as_ref().map(|m| m.as_bool()),
                     })
                     .collect();
+                let mut dst = self.scatter_target(op, values, Contents::Zeroed)?;
                 kernels::scatter_combine_parts(*combine, &parts, &mut dst)
                     .map_err(RunError::from)?;
                 self.store(op.outputs[0], dst);
@@ -508,13 +623,20 @@ impl StageRun<'_, '_> {
                     Contents::Overwritten,
                     records,
                 ));
-                results
-                    .par_iter()
-                    .zip(carries)
-                    .try_for_each(|(result, carry)| {
+                let inputs = results
+                    .iter()
+                    .map(|result| {
                         let SinkPart::Scan { values, flags, .. } = &result.sinks[number] else {
                             unreachable!()
                         };
+                        Ok((input(values)?, flags.as_ref().map(input).transpose()?))
+                    })
+                    .collect::<Result<Vec<_>, RunError>>()?;
+                results
+                    .par_iter()
+                    .zip(carries)
+                    .zip(&inputs)
+                    .try_for_each(|((result, carry), (values, flags))| {
                         let range = result.range.clone();
                         let flags = flags.as_ref().map(|f| f.view(&range));
                         let part = kernels::scan_chunk(
@@ -530,14 +652,19 @@ impl StageRun<'_, '_> {
                 self.store(op.outputs[0], target.into_column());
             }
             OpKind::Sort { .. } => {
+                let inputs = results
+                    .iter()
+                    .map(|result| match &result.sinks[number] {
+                        SinkPart::Sort(inputs) => inputs.iter().map(input).collect(),
+                        _ => unreachable!(),
+                    })
+                    .collect::<Result<Vec<Vec<ChunkValue>>, RunError>>()?;
                 // Each input as the chunks' views of it, in chunk order.
-                let parts = |input: usize| -> Vec<ColumnView<'_>> {
-                    results
+                let parts = |number: usize| -> Vec<ColumnView<'_>> {
+                    inputs
                         .iter()
-                        .map(|result| match &result.sinks[number] {
-                            SinkPart::Sort(inputs) => inputs[input].view(&result.range),
-                            _ => unreachable!(),
-                        })
+                        .zip(results)
+                        .map(|(inputs, result)| inputs[number].view(&result.range))
                         .collect()
                 };
                 let key_type = self.elem_type(op.inputs[0]);
@@ -549,13 +676,11 @@ impl StageRun<'_, '_> {
                 let sorted_values = match op.inputs.get(1) {
                     Some(&values) => {
                         let ty = self.elem_type(values);
-                        // Values made before the stage are read where they are.
-                        let whole = results.first().and_then(|r| match &r.sinks[number] {
-                            SinkPart::Sort(inputs) => match &inputs[1] {
-                                ChunkValue::Whole(array) => Some(array.clone()),
-                                ChunkValue::Chunk(_) => None,
-                            },
-                            _ => None,
+                        // Values made before the stage, or stored whole by its
+                        // chunks, are read where they are.
+                        let whole = inputs.first().and_then(|inputs| match &inputs[1] {
+                            ChunkValue::Whole(array) => Some(array.clone()),
+                            ChunkValue::Chunk(_) => None,
                         });
                         let joined = whole.unwrap_or_else(|| {
                             Arc::new(Column::concat_views(ty, &parts(1), records))
@@ -586,9 +711,10 @@ impl StageRun<'_, '_> {
         host_values: &[OpHostValues],
         segments: &[Option<PreparedSegment>],
         direct: &DirectScatters,
-        materialised: &[(VarId, SharedTarget)],
+        arrays: &StageArrays<'_>,
         range: Range<usize>,
     ) -> Result<ChunkResult, RunError> {
+        let StageArrays { materialised, kept } = *arrays;
         let records = &self.context.library.records;
         // A nested stage's inner ops run over the chunk's groups' elements.
         let (inner_ops, inner_range) = match self.call.inner_level() {
@@ -605,6 +731,33 @@ impl StageRun<'_, '_> {
                     None => Ok(ChunkValue::Whole(self.array(var)?.clone())),
                 }
             };
+        // Which of the `kept` values this chunk has copied its range of.
+        let mut kept_written = vec![false; kept.len()];
+        // A sink's input: a materialised value is stored after the ops, a
+        // kept one now (once), both to stage-wide arrays.
+        let sink_input = |locals: &Vec<(VarId, ChunkValue)>,
+                          kept_written: &mut Vec<bool>,
+                          var: VarId|
+         -> Result<SinkInput, RunError> {
+            if materialised.iter().any(|(v, _)| *v == var) {
+                return Ok(SinkInput::Stored(var));
+            }
+            let value = lookup(locals, var)?;
+            let Some(place) = kept.iter().position(|(v, _)| *v == var) else {
+                return Ok(SinkInput::Value(value));
+            };
+            if let ChunkValue::Whole(_) = value {
+                return Ok(SinkInput::Value(value));
+            }
+            if !kept_written[place] {
+                kept[place]
+                    .1
+                    .write_range(stage_range.start, &value.view(&stage_range))
+                    .map_err(RunError::from)?;
+                kept_written[place] = true;
+            }
+            Ok(SinkInput::Stored(var))
+        };
         let mut sinks = Vec::new();
         // By claims group: this chunk's claims, made by the group's first scatter.
         let mut claims: Vec<Option<Claimed>> = direct.groups.iter().map(|_| None).collect();
@@ -765,9 +918,11 @@ impl StageRun<'_, '_> {
                         continue;
                     }
                     sinks.push(SinkPart::Scatter {
-                        indices: lookup(&locals, op.inputs[0])?,
-                        values: lookup(&locals, op.inputs[1])?,
-                        mask: mask.map(|m| lookup(&locals, m)).transpose()?,
+                        indices: sink_input(&locals, &mut kept_written, op.inputs[0])?,
+                        values: sink_input(&locals, &mut kept_written, op.inputs[1])?,
+                        mask: mask
+                            .map(|m| sink_input(&locals, &mut kept_written, m))
+                            .transpose()?,
                     });
                 }
                 OpKind::Reduce { op: monoid } => {
@@ -791,13 +946,18 @@ impl StageRun<'_, '_> {
                     )
                     .map_err(RunError::from)?;
                     sinks.push(SinkPart::Scan {
-                        values: input,
-                        flags,
+                        values: sink_input(&locals, &mut kept_written, op.inputs[0])?,
+                        flags: segments
+                            .map(|f| sink_input(&locals, &mut kept_written, f))
+                            .transpose()?,
                         total,
                     });
                 }
                 OpKind::Sort { .. } => {
-                    let inputs = op.inputs.iter().map(|v| lookup(&locals, *v));
+                    let inputs = op
+                        .inputs
+                        .iter()
+                        .map(|v| sink_input(&locals, &mut kept_written, *v));
                     sinks.push(SinkPart::Sort(inputs.collect::<Result<_, _>>()?));
                 }
                 OpKind::Elementwise { .. } => {

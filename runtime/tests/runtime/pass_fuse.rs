@@ -1425,3 +1425,44 @@ fn a_side_stage_the_open_stage_reads_runs_first() {
     "
     );
 }
+
+/// Sinks that finish after their stage (a combining scatter, a segmented scan,
+/// a sort by key) reading values their stage made, over sixteen chunks of the
+/// tests' 64 elements: the fused run keeps those values in stage-wide arrays,
+/// not the chunks' columns (`key` is also read after its stage, so it is
+/// materialised anyway), and must agree with the unfused run bit for bit
+/// (the float sums fold in a fixed order).
+#[test]
+fn sinks_after_the_stage_read_the_values_it_made_from_every_chunk() {
+    let source = trim_indent(
+        r#"
+        param n = 1000
+        pipeline p {
+            x = iota(n)
+            out key = map<rem>(map<hash>(x), fill(n, 37))
+            out sums = scatter<add>(key, map<random>(x, seed: 3), into: fill(37, 0.0))
+            starts = map<eq>(map<rem>(x, fill(n, 100)), fill(n, 0))
+            out prefix = scan<add>(map<random>(x, seed: 5), segments: starts)
+            sortKey = map<rem>(map<hash>(x, seed: 1), fill(n, 37))
+            (sortedKeys, sortedWeights) = sortByKey(sortKey, map<random>(x, seed: 7))
+            out sortedKeys
+            out sortedWeights
+        }
+        "#,
+    );
+    let library = library();
+    let fused = compile(&source, true, &library);
+    let plan = plan_to_text(&fused, &library);
+    // The sinks share stages with the maps that make what they read.
+    for sink in [
+        "map<random> → scatter<add>",
+        "map<random> → scan<add>",
+        "map<random> → sortByKey",
+    ] {
+        assert!(plan.contains(sink), "no `{sink}` in\n{plan}");
+    }
+    let unfused = compile(&source, false, &library);
+    let (outputs, unfused_outputs) = (run_text(&fused, &library), run_text(&unfused, &library));
+    assert!(!outputs.starts_with("run-time error"), "{outputs}");
+    assert_eq!(outputs, unfused_outputs);
+}
