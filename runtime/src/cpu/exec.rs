@@ -160,8 +160,9 @@ enum SinkPart {
 /// stage makes, the name of a stage-wide array the chunk copied its range
 /// into. The chunk's own columns then go back to the allocator as the chunk
 /// ends, and the next chunk's reuse them: kept to the end of the stage, each
-/// chunk's were fresh pages, and WORKLOAD3's `map<shader>` took twice its
-/// time faulting in the colours `scatter<add>` kept (docs/benchmarks.md).
+/// chunk's could be fresh pages (in a process rendering the bunny alone,
+/// WORKLOAD3's `map<shader>` took twice its time faulting in the colours
+/// `scatter<add>` kept; docs/benchmarks.md, "A seventh day").
 #[derive(Clone)]
 enum SinkInput {
     Value(ChunkValue),
