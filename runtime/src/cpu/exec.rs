@@ -224,7 +224,7 @@ impl StageRun<'_, '_> {
         // chunk keeps its columns to the end of the stage and nothing is
         // joined after it. The same for the values sinks keep.
         let materialised = self.stage_wide_arrays(elementwise_materialised(stage));
-        let kept = self.stage_wide_arrays(self.sink_kept_values(&direct, &materialised));
+        let kept = self.stage_wide_arrays(self.sink_kept_values(&materialised));
         let segments = match self.context.elementwise {
             Elementwise::Compiled => compiled::prepare(self.call),
             Elementwise::Columns => Vec::new(),
@@ -303,11 +303,7 @@ impl StageRun<'_, '_> {
     /// The values made in the stage that its sinks finishing after it read
     /// (combining scatters, scans and sorts), but for the materialised ones:
     /// each gets a stage-wide array (see [`SinkInput`]).
-    fn sink_kept_values(
-        &self,
-        direct: &DirectScatters,
-        materialised: &[(VarId, SharedTarget)],
-    ) -> Vec<VarId> {
+    fn sink_kept_values(&self, materialised: &[(VarId, SharedTarget)]) -> Vec<VarId> {
         let stage = self.call.stage;
         let outer_ops = &stage.ops[self.call.inner_level().map_or(0, |(ops, _)| ops)..];
         // Made by the chunks: a field of an array made before the stage is
@@ -321,15 +317,14 @@ impl StageRun<'_, '_> {
         };
         let mut kept = Vec::new();
         let sinks = stage.ops.iter().filter(|op| op.is_sink());
-        for (number, op) in sinks.enumerate() {
+        for op in sinks {
+            // (A plain scatter writes from inside its chunks.)
             let inputs: Vec<VarId> = match &op.kind {
                 OpKind::Scatter {
                     mask,
                     combine: Some(_),
                     ..
-                } if direct.targets[number].is_none() => {
-                    op.inputs[..2].iter().copied().chain(*mask).collect()
-                }
+                } => op.inputs[..2].iter().copied().chain(*mask).collect(),
                 OpKind::Scan { segments, .. } => {
                     op.inputs[..1].iter().copied().chain(*segments).collect()
                 }
