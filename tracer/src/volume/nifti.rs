@@ -331,36 +331,13 @@ fn image_path(path: &Path) -> PathBuf {
 
 /// Reads a NIfTI-1 volume (see the module documentation for what is read).
 pub fn read_nifti(path: &Path) -> Result<Volume, VolumeError> {
-    let mut reader = open(path)?;
-    let bytes = read_up_to(&mut reader, HEADER_SIZE as u64, path)?;
-    let Ok(bytes) = <[u8; HEADER_SIZE]>::try_from(bytes.as_slice()) else {
-        return Err(VolumeError::Truncated {
-            path: path.to_path_buf(),
-            what: "the NIfTI-1 header".into(),
-            needed: HEADER_SIZE as u64,
-            actual: bytes.len() as u64,
-        });
-    };
-    let (header, endian) = Header::parse(&bytes, path)?;
-    let layout = Layout::of(&header, path)?;
-
+    let (header, endian, layout, header_reader) = read_header(path)?;
     // The samples: after the header in the same file, or in the `.img` file.
-    let single = header.magic == MAGIC_SINGLE;
-    let (data_path, mut data_reader, already_read) = if single {
-        if layout.vox_offset < HEADER_SIZE as u64 {
-            return Err(bad_header(
-                path,
-                format!(
-                    "vox_offset {} lies inside the {HEADER_SIZE}-byte header",
-                    layout.vox_offset
-                ),
-            ));
-        }
-        (path.to_path_buf(), reader, HEADER_SIZE as u64)
+    let data_path = samples_path(&header, path);
+    let (mut data_reader, already_read) = if header.magic == MAGIC_SINGLE {
+        (header_reader, HEADER_SIZE as u64)
     } else {
-        let image = image_path(path);
-        let reader = open(&image)?;
-        (image, reader, 0)
+        (open(&data_path)?, 0)
     };
     let skipped = skip(
         &mut *data_reader,
@@ -369,17 +346,8 @@ pub fn read_nifti(path: &Path) -> Result<Volume, VolumeError> {
     )?;
     let data = read_up_to(&mut *data_reader, layout.data_bytes, &data_path)?;
     if (data.len() as u64) < layout.data_bytes {
-        let [x, y, z] = layout.dims;
-        return Err(VolumeError::Truncated {
-            path: data_path,
-            what: format!(
-                "{x}×{y}×{z} {} samples from byte {}",
-                layout.datatype.name(),
-                layout.vox_offset
-            ),
-            needed: layout.vox_offset + layout.data_bytes,
-            actual: already_read + skipped + data.len() as u64,
-        });
+        let actual = already_read + skipped + data.len() as u64;
+        return Err(truncated_samples(&layout, data_path, actual));
     }
 
     let (slope, inter) = (header.scl_slope as f64, header.scl_inter as f64);
@@ -399,6 +367,32 @@ pub fn read_nifti(path: &Path) -> Result<Volume, VolumeError> {
         first: UVec3::ZERO,
         values,
     })
+}
+
+/// The file that holds the samples: the header's own (`.nii`), or the `.img`
+/// beside it.
+fn samples_path(header: &Header, path: &Path) -> PathBuf {
+    if header.magic == MAGIC_SINGLE {
+        path.to_path_buf()
+    } else {
+        image_path(path)
+    }
+}
+
+/// The error for a samples file that ends after `actual` of the bytes
+/// `layout` needs.
+fn truncated_samples(layout: &Layout, data_path: PathBuf, actual: u64) -> VolumeError {
+    let [x, y, z] = layout.dims;
+    VolumeError::Truncated {
+        path: data_path,
+        what: format!(
+            "{x}×{y}×{z} {} samples from byte {}",
+            layout.datatype.name(),
+            layout.vox_offset
+        ),
+        needed: layout.vox_offset + layout.data_bytes,
+        actual,
+    }
 }
 
 /// The header of a NIfTI-1 file, checked, with the reader positioned after it.
@@ -450,28 +444,12 @@ pub fn read_nifti_box(path: &Path, samples: [UVec3; 2]) -> Result<Volume, Volume
     let dims = UVec3::new(x, y, z);
     super::raw::check_box(path, dims, samples)?;
     let single = header.magic == MAGIC_SINGLE;
-    let data_path = if single {
-        path.to_path_buf()
-    } else {
-        image_path(path)
-    };
+    let data_path = samples_path(&header, path);
     let size = layout.datatype.size() as u64;
     let local = samples[1] - samples[0];
     let mut data = vec![0u8; (sample_count(local.as_u64vec3().to_array()) * size) as usize];
     let runs = super::raw::box_runs(dims, samples);
-    let truncated = |actual: u64| {
-        let [x, y, z] = layout.dims;
-        VolumeError::Truncated {
-            path: data_path.clone(),
-            what: format!(
-                "{x}×{y}×{z} {} samples from byte {}",
-                layout.datatype.name(),
-                layout.vox_offset
-            ),
-            needed: layout.vox_offset + layout.data_bytes,
-            actual,
-        }
-    };
+    let truncated = |actual: u64| truncated_samples(&layout, data_path.clone(), actual);
     let gzipped = {
         let mut file = BufReader::new(File::open(&data_path).map_err(io_error(&data_path))?);
         file.fill_buf()
