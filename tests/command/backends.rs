@@ -6,7 +6,7 @@
 //! Without a GPU adapter these tests skip with a printed reason, unless
 //! `DPP_REQUIRE_GPU` is set (CI sets it and installs Mesa's lavapipe).
 
-use crate::common::{mean_flip, scene_dir, Image, SCENE_VIEW};
+use crate::common::{mean_flip, read_npy, scene_dir, Image, SCENE_VIEW};
 use std::path::Path;
 use std::process::Command;
 
@@ -31,11 +31,6 @@ fn run(dir: &Path, pipeline: &Path, args: &[String], backend: &str) -> String {
         String::from_utf8_lossy(&output.stderr)
     );
     String::from_utf8_lossy(&output.stdout).into_owned()
-}
-
-fn read_npy<T: npyz::Deserialize>(path: &Path) -> Vec<T> {
-    let bytes = std::fs::read(path).unwrap();
-    npyz::NpyFile::new(&bytes[..]).unwrap().into_vec().unwrap()
 }
 
 /// The outputs each pipeline is compared on, and its arguments.

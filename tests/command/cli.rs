@@ -2,9 +2,7 @@
 //! outputs, and WORKLOAD1's triangle ids against an independent brute-force
 //! tracer that implements the camera of docs/language.md §8 on its own.
 
-use crate::common::{dpp, text};
-
-use std::path::Path;
+use crate::common::{dpp, read_npy, text};
 
 fn pipeline(name: &str) -> String {
     crate::common::repo()
@@ -12,11 +10,6 @@ fn pipeline(name: &str) -> String {
         .join(name)
         .display()
         .to_string()
-}
-
-fn read_npy<T: npyz::Deserialize>(path: &Path) -> Vec<T> {
-    let bytes = std::fs::read(path).unwrap();
-    npyz::NpyFile::new(&bytes[..]).unwrap().into_vec().unwrap()
 }
 
 /// A mesh of random triangles in the unit cube, as OBJ text, and its triangles.

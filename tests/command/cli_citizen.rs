@@ -3,7 +3,7 @@
 //! killed while writing, absurd resources, a terminal (progress) or none, a
 //! GPU run without `XDG_RUNTIME_DIR`.
 
-use crate::common::text;
+use crate::common::{read_npy, text};
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
@@ -29,11 +29,6 @@ fn scene_dir() -> tempfile::TempDir {
 
 fn all_text(output: &Output) -> String {
     format!("{}{}", text(&output.stdout), text(&output.stderr))
-}
-
-fn read_npy<T: npyz::Deserialize>(path: &Path) -> Vec<T> {
-    let bytes = std::fs::read(path).unwrap();
-    npyz::NpyFile::new(&bytes[..]).unwrap().into_vec().unwrap()
 }
 
 /// The files in `dir` whose names start with `.dpp-` (temporary outputs).

@@ -9,7 +9,7 @@
 //! test instead of stalling CI. Run as root (CI containers), `mpirun` needs
 //! `OMPI_ALLOW_RUN_AS_ROOT`, which [`mpirun`] sets.
 
-use crate::common::{mean_flip, repo, Image};
+use crate::common::{mean_flip, read_npy, repo, Image};
 
 use std::fmt::Write as _;
 use std::os::unix::process::CommandExt;
@@ -136,11 +136,6 @@ fn mpirun_mpmd(dir: &Path, programs: &[(usize, &[&str])]) -> Outcome {
 /// `mpirun -n RANKS dpp ARGS` in `dir`.
 fn mpirun(dir: &Path, ranks: usize, args: &[&str]) -> Outcome {
     mpirun_mpmd(dir, &[(ranks, args)])
-}
-
-fn read_npy<T: npyz::Deserialize>(path: &Path) -> Vec<T> {
-    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    npyz::NpyFile::new(&bytes[..]).unwrap().into_vec().unwrap()
 }
 
 /// WORKLOAD1's depth and triangle ids.

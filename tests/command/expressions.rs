@@ -5,7 +5,7 @@
 //! coverage (and WORKLOAD2's depth) bit for bit, on the built-in scene and
 //! the small boxes scene, on the CPU and (where an adapter starts) the GPU.
 
-use crate::common::{dpp, gpu_available, repo, scene_dir, SCENE_VIEW};
+use crate::common::{gpu_available, repo, run_pipeline_outputs, scene_dir, SCENE_VIEW};
 use std::path::Path;
 
 /// Largest difference of an sRGB-encoded pixel component. The pipeline sums
@@ -16,11 +16,6 @@ use std::path::Path;
 /// (320×240 built-in scene, CPU): at most 9.5e-7, on 8% of components.
 const IMAGE_TOLERANCE: f32 = 2e-6;
 
-fn read_npy<T: npyz::Deserialize>(path: &Path) -> Vec<T> {
-    let bytes = std::fs::read(path).unwrap();
-    npyz::NpyFile::new(&bytes[..]).unwrap().into_vec().unwrap()
-}
-
 /// Runs `pipeline` with `args` on `backend`; returns the float arrays of `outputs`.
 fn run(
     dir: &Path,
@@ -29,24 +24,9 @@ fn run(
     backend: &str,
     outputs: &[&str],
 ) -> Vec<Vec<f32>> {
-    let pipeline = repo().join("pipelines").join(pipeline);
-    let mut all: Vec<String> = vec!["run".into(), pipeline.display().to_string()];
-    all.extend(args.iter().map(|a| a.to_string()));
-    all.extend(["--backend".into(), backend.into()]);
-    for name in outputs {
-        all.extend(["--out".into(), format!("{name}={name}.npy")]);
-    }
-    let all: Vec<&str> = all.iter().map(String::as_str).collect();
-    let output = dpp(&all, dir);
-    assert!(
-        output.status.success(),
-        "dpp {all:?}: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    outputs
-        .iter()
-        .map(|name| read_npy::<f32>(&dir.join(format!("{name}.npy"))))
-        .collect()
+    let mut all = args.to_vec();
+    all.extend(["--backend", backend]);
+    run_pipeline_outputs(dir, pipeline, &all, outputs)
 }
 
 fn check_equal_to_the_functor(backend: &str) {

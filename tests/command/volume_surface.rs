@@ -5,28 +5,15 @@
 //! surface cuts the march short; where no surface is hit the march is the
 //! same, bit for bit; and the surface makes its pixels opaque.
 
-use crate::common::{dpp, read_npy, repo};
+use crate::common::{dpp, repo, run_pipeline_outputs};
 use std::path::Path;
 
+/// Runs `pipeline` on a small generated sphere with `args`; returns the float
+/// arrays of `outputs`.
 fn run(dir: &Path, pipeline: &str, args: &[&str], outputs: &[&str]) -> Vec<Vec<f32>> {
-    let pipeline = repo().join("pipelines").join(pipeline);
-    let mut all: Vec<String> = vec!["run".into(), pipeline.display().to_string()];
-    all.extend(["sphere:32", "--size", "64x48", "--transfer", "viridis"].map(String::from));
-    all.extend(args.iter().map(|a| a.to_string()));
-    for name in outputs {
-        all.extend(["--out".into(), format!("{name}={name}.npy")]);
-    }
-    let all: Vec<&str> = all.iter().map(String::as_str).collect();
-    let output = dpp(&all, dir);
-    assert!(
-        output.status.success(),
-        "dpp {all:?}: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    outputs
-        .iter()
-        .map(|name| read_npy::<f32>(&dir.join(format!("{name}.npy"))))
-        .collect()
+    let mut all = vec!["sphere:32", "--size", "64x48", "--transfer", "viridis"];
+    all.extend_from_slice(args);
+    run_pipeline_outputs(dir, pipeline, &all, outputs)
 }
 
 #[test]

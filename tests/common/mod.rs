@@ -198,6 +198,33 @@ pub fn mean_flip(reference: &Image, test: &Image) -> f32 {
 
 /// The values of a `.npy` file.
 pub fn read_npy<T: npyz::Deserialize>(path: &Path) -> Vec<T> {
-    let bytes = std::fs::read(path).unwrap();
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     npyz::NpyFile::new(&bytes[..]).unwrap().into_vec().unwrap()
+}
+
+/// Runs `pipelines/{pipeline}` with `args` in `dir`, which must succeed, and
+/// returns the float arrays of its `outputs` (written as `.npy` files there).
+pub fn run_pipeline_outputs(
+    dir: &Path,
+    pipeline: &str,
+    args: &[&str],
+    outputs: &[&str],
+) -> Vec<Vec<f32>> {
+    let pipeline = repo().join("pipelines").join(pipeline);
+    let mut all: Vec<String> = vec!["run".into(), pipeline.display().to_string()];
+    all.extend(args.iter().map(|a| a.to_string()));
+    for name in outputs {
+        all.extend(["--out".into(), format!("{name}={name}.npy")]);
+    }
+    let all: Vec<&str> = all.iter().map(String::as_str).collect();
+    let output = dpp(&all, dir);
+    assert!(
+        output.status.success(),
+        "dpp {all:?}: {}",
+        text(&output.stderr)
+    );
+    outputs
+        .iter()
+        .map(|name| read_npy::<f32>(&dir.join(format!("{name}.npy"))))
+        .collect()
 }
