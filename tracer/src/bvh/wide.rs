@@ -884,6 +884,23 @@ fn walk<
                     current = node.children[first];
                     continue 'visit;
                 }
+                if ANY_HIT {
+                    // Any hit: in lane order, unsorted, as an any-hit packet
+                    // takes them (`traverse_packet` says why).
+                    let mut remaining = hits;
+                    while remaining != 0 {
+                        let lane = remaining.trailing_zeros() as usize;
+                        remaining &= remaining - 1;
+                        stack[stack_len] = StackEntry {
+                            node: node.children[lane],
+                            t_entry: t_entry[lane],
+                        };
+                        stack_len += 1;
+                    }
+                    stack_len -= 1;
+                    current = stack[stack_len].node;
+                    continue 'visit;
+                }
                 if others & (others - 1) == 0 {
                     let second = others.trailing_zeros() as usize;
                     let (near, far) = if t_entry[second] < t_entry[first] {
@@ -969,7 +986,8 @@ fn walk<
             }
             stack_len -= 1;
             let entry = stack[stack_len];
-            if entry.t_entry <= closest * ROBUST_FAR_SCALE {
+            // An any-hit walk's `closest` never changes: it ends at a hit.
+            if ANY_HIT || entry.t_entry <= closest * ROBUST_FAR_SCALE {
                 current = entry.node;
                 continue 'visit;
             }

@@ -12,8 +12,9 @@
 //! - a packet none of whose rays enters the tree's box ends at once;
 //! - a packet tests a node's eight children's boxes against its frustum (the
 //!   range of its rays' origins and inverse directions, up to its farthest
-//!   closest hit so far) and visits those that pass nearest first by the
-//!   frustum's entry distance. A closest-hit packet (a camera's rays from one
+//!   closest hit so far); a closest-hit packet visits those that pass nearest
+//!   first by the frustum's entry distance, an any-hit packet in lane order
+//!   (most of its rays visit them all). A closest-hit packet (a camera's rays from one
 //!   origin) goes by the frustum alone where it bounds all three axes, as
 //!   Embree's coherent packets do: its rays' own box tests dropped 0.4% of
 //!   the children the frustum passed on the bunny and cost more than the
@@ -262,13 +263,39 @@ fn traverse_packet<
             hit_u = lanes.load_row(&u_row);
             hit_v = lanes.load_row(&v_row);
             frustum.farthest = lanes.greatest(closest);
+        } else if ANY_HIT && current & LEAF == 0 {
+            // Unless it is blocked, an any-hit ray visits every box it enters,
+            // whatever the order, and most are not blocked: the children go on
+            // the stack as they come (taken nearest first, occlusion rays took
+            // 1.02-1.07 and shadow rays 1.07-1.56 times as long).
+            let node = &wide.nodes[current as usize];
+            let pushed_from = stack_len;
+            let mut children = frustum.children_entered(boxes, node).0;
+            while children != 0 {
+                let child = children.trailing_zeros() as usize;
+                children &= children - 1;
+                let rays_in = box_rays
+                    .enter(lanes, |plane| node.planes[plane][child], closest, active)
+                    .0;
+                if rays_in != 0 {
+                    // No entry distance: see the pop below.
+                    stack.entries[stack_len] = (node.children[child], rays_in);
+                    stack_len += 1;
+                }
+            }
+            if stack_len > pushed_from {
+                stack_len -= 1;
+                (current, active) = stack.entries[stack_len];
+                continue 'visit;
+            }
         } else if current & LEAF == 0 {
             let node = &wide.nodes[current as usize];
             let mut entered = [(0u32, 0u32, 0.0f32); WIDTH];
             let mut t_entry = [zero; WIDTH];
             let mut count = 0;
-            // Children are taken nearest first by the frustum's entry distance
-            // (a bound on their rays', as Embree orders a coherent packet's).
+            // Closest hits: children are taken nearest first by the frustum's
+            // entry distance (a bound on their rays', as Embree orders a
+            // coherent packet's).
             let (mut children, frustum_entry) = frustum.children_entered(boxes, node);
             while children != 0 {
                 let child = children.trailing_zeros() as usize;
@@ -383,8 +410,14 @@ fn traverse_packet<
             }
             stack_len -= 1;
             let (node, rays_in) = stack.entries[stack_len];
-            let t_entry = lanes.load_row(&stack.t_entry[stack_len]);
-            let still = rays_in & lanes.le(t_entry, limit) & !done;
+            // An any-hit ray's `closest` is its `tmax` until it is done, so it
+            // still enters every box it entered when pushed.
+            let still = if ANY_HIT {
+                rays_in & !done
+            } else {
+                let t_entry = lanes.load_row(&stack.t_entry[stack_len]);
+                rays_in & lanes.le(t_entry, limit)
+            };
             if still != 0 {
                 current = node;
                 active = still;
