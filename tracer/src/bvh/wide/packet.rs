@@ -14,8 +14,9 @@
 //!   range of its rays' origins and inverse directions, up to its farthest
 //!   closest hit so far); a closest-hit packet visits those that pass nearest
 //!   first by the frustum's entry distance, an any-hit packet in lane order
-//!   (most of its rays visit them all). A closest-hit packet (a camera's rays from one
-//!   origin) goes by the frustum alone where it bounds all three axes, as
+//!   (most of its rays visit them all). A closest-hit packet (a camera's
+//!   rays from one origin) goes by the frustum alone where it bounds all
+//!   three axes, as
 //!   Embree's coherent packets do: its rays' own box tests dropped 0.4% of
 //!   the children the frustum passed on the bunny and cost more than the
 //!   visits they saved (without them the traversal is 1.10-1.22x as fast).
@@ -46,8 +47,9 @@ pub(super) fn single_rays_below<T: Lanes>() -> u32 {
     (T::N / 4) as u32
 }
 
-/// Nodes still to visit: the node, the rays that entered its box, and their entry
-/// distances (a ray is dropped on pop if it has found a closer hit since).
+/// Nodes still to visit: the node, the rays that entered its box, and (for
+/// closest hits) their entry distances: a ray is dropped on pop if it has
+/// found a closer hit since.
 pub(super) struct PacketStack {
     entries: Vec<(u32, u32)>,
     t_entry: Vec<[f32; MAX_PACKET]>,
