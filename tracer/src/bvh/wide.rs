@@ -458,13 +458,6 @@ pub(super) fn occluded_batch(
 /// A batch's traversal on the lanes an [`Isa`] gives: `S` tests boxes, `T`
 /// triangles (and holds a packet's rays, one per lane).
 trait BatchJob {
-    /// Whether the job's `T` is sixteen lanes on AVX2 too (two registers), not
-    /// eight. Closest-hit packets are a camera's rays from one origin, and
-    /// sixteen of them (as Embree's packets) share their nodes: WORKLOAD1's
-    /// `map<intersect>` takes 0.77-0.87 of the time it takes in packets of
-    /// eight. Any-hit packets, rays from several points, were as often slower
-    /// as faster in sixteen (docs/benchmarks.md).
-    const SIXTEEN_LANES_ON_AVX2: bool;
     fn run<S: Lanes8, T: Lanes>(self, boxes: S, triangles: T);
 }
 
@@ -494,14 +487,17 @@ unsafe fn run_avx512(lanes: super::simd::Avx512, job: impl BatchJob) {
     job.run(lanes, lanes.x16())
 }
 
+/// Packets of sixteen rays in two registers, as on AVX-512. A camera's
+/// closest-hit rays from one origin share their nodes (as Embree's 16-ray
+/// packets): WORKLOAD1's `map<intersect>` takes 0.77-0.87 of the time it
+/// takes in packets of eight. Any-hit rays from several points were as often
+/// slower as faster in sixteen while their traversals sorted each node's
+/// children; unsorted, sixteen take 0.92-0.97 of the time for occlusion rays
+/// and 0.86-0.95 for shadow rays (docs/benchmarks.md).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn run_avx2<J: BatchJob>(lanes: super::simd::Avx2, job: J) {
-    if J::SIXTEEN_LANES_ON_AVX2 {
-        job.run(lanes, lanes.x16())
-    } else {
-        job.run(lanes, lanes)
-    }
+unsafe fn run_avx2(lanes: super::simd::Avx2, job: impl BatchJob) {
+    job.run(lanes, lanes.x16())
 }
 
 /// Rays an any-hit batch sorts by [`packet_key`] at a time.
@@ -554,8 +550,6 @@ struct AnyHits<L> {
 }
 
 impl<R: Fn(usize) -> Ray, K: FnMut(&[Found])> BatchJob for Batch<'_, R, K, ClosestHits> {
-    const SIXTEEN_LANES_ON_AVX2: bool = true;
-
     /// `T::N` rays at a time as a packet where they can ([`is_packet`]: the
     /// coherent rays of a camera), else one by one.
     #[inline(always)]
@@ -604,8 +598,6 @@ impl<R: Fn(usize) -> Ray, K: FnMut(&[Found])> BatchJob for Batch<'_, R, K, Close
 impl<R: Fn(usize) -> Ray, K: FnMut(&[bool]), L: Fn(usize) -> f32> BatchJob
     for Batch<'_, R, K, AnyHits<L>>
 {
-    const SIXTEEN_LANES_ON_AVX2: bool = false;
-
     #[inline(always)]
     fn run<S: Lanes8, T: Lanes>(self, boxes: S, triangles: T) {
         let (bvh, count, ray, mut sink, AnyHits { tmax }) = self.into_parts();

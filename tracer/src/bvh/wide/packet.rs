@@ -37,8 +37,7 @@ use super::{
     WideNode, GROUP, LEAF, NO_HIT, ROBUST_FAR_SCALE, STACK_ENTRIES, WIDTH,
 };
 
-/// The widest packet (16 rays: AVX-512's, and AVX2's closest-hit packets in
-/// pairs of registers).
+/// The widest packet (16 rays: AVX-512's, and AVX2's in pairs of registers).
 pub(super) const MAX_PACKET: usize = 16;
 
 /// A subtree that at most a quarter of a packet's rays enter is finished by
